@@ -1,0 +1,1 @@
+"""fitting: batched, differentiable parameter fits built on pmpjax (never imported by pmpjax)."""

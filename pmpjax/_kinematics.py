@@ -1,0 +1,212 @@
+"""Kinematic chains ``x = fk(q)``: the wrist of Eq 6, planar n-link arms, user FK functions.
+
+Every chain exposes ``n`` (joints), ``m`` (task dimensions), ``fk(q)`` (..., n) -> (..., m) and
+``jacobian(q)`` (..., n) -> (..., m, n), plus the component-leading kernel ``fk_jac_soa`` used
+inside integrators (see ``_linalg``). Chains are pytrees: lengths are leaves, sizes are static.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._linalg import det, from_soa, mm, to_soa
+from ._pytree import pytree_dataclass, static_field
+from ._validate import as_array, check_positive, is_concrete
+
+
+class Chain:
+    """Base class: subclasses implement ``n``, ``m`` and ``fk_jac_soa``."""
+
+    n: int
+    m: int
+
+    def fk_jac_soa(self, qc):
+        """``qc`` (n, ...) -> ``x`` (m, ...), ``J`` (m, n, ...)."""
+        raise NotImplementedError
+
+    def fk(self, q):
+        """Task position ``x`` (..., m) of joint angles ``q`` (..., n) [rad]."""
+        q = as_array("q", q, tail=(self.n,))
+        return from_soa(self.fk_jac_soa(to_soa(jnp.asarray(q)))[0])
+
+    def jacobian(self, q):
+        """Task Jacobian ``∂fk/∂q`` (..., m, n) at ``q`` (..., n) (Eq 2)."""
+        q = as_array("q", q, tail=(self.n,))
+        return from_soa(self.fk_jac_soa(to_soa(jnp.asarray(q)))[1], 2)
+
+    def reachable(self, x) -> np.ndarray:
+        """Boolean (...,) mask of task points ``x`` (..., m) inside the reachable workspace."""
+        return np.ones(np.shape(x)[:-1], dtype=bool)
+
+    def check_target(self, name: str, x) -> None:
+        """Raise ``ValueError`` naming ``name`` if any concrete target is unreachable."""
+        if is_concrete(x):
+            ok = self.reachable(np.asarray(x, dtype=float))
+            if not np.all(ok):
+                bad = np.asarray(x, dtype=float).reshape(-1, self.m)[~ok.reshape(-1)][0]
+                raise ValueError(
+                    f"`{name}` has {int((~ok).sum())} point(s) outside the reachable workspace "
+                    f"of {type(self).__name__} ({self.workspace_description()}); first: {bad}"
+                )
+
+    def workspace_description(self) -> str:
+        return "unbounded"
+
+
+def manipulability(chain: Chain, q):
+    """Yoshikawa manipulability ``sqrt(det(J Jᵀ))`` (...,) at ``q`` (..., n).
+
+    It falls to zero where the Jacobian loses rank (wrist: pointing at the rim of the screen
+    hemisphere, which includes gimbal lock FE = ±90°), so it is the detector for singular postures.
+    """
+    J = chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1]
+    JJt = mm(J, jnp.swapaxes(J, 0, 1))
+    return jnp.sqrt(jnp.maximum(det(JJt), 0.0))
+
+
+@pytree_dataclass
+class Wrist(Chain):
+    """Wrist pointing on a screen at distance ``d`` [m] (Eq 6).
+
+    ``q = (q_PS, q_FE, q_RUD)`` [rad]; ``R(q) = exp(−ê_x q_PS) exp(ê_z q_FE) exp(ê_y q_RUD)``;
+    ``x = [[0, −d, 0], [0, 0, d]] R(q) e_x`` [m]: ``x1`` to the right (East), ``x2`` up (North).
+
+    The Jacobian is analytic. It loses rank where the pointing axis ``R e_x`` lies in the screen
+    plane (``|x| = d``), which includes gimbal lock at ``q_FE = ±π/2``; ``reachable`` accepts
+    ``|x| ≤ d·sin(max_angle)`` (default 80°) to stay clear of that rim.
+    """
+
+    d: float = 1.0
+    max_angle: float = static_field(default=float(np.deg2rad(80.0)))
+    n: int = static_field(default=3)
+    m: int = static_field(default=2)
+
+    def __post_init__(self):
+        check_positive("d", self.d)
+
+    def fk_jac_soa(self, qc):
+        d = self.d
+        sa, ca = jnp.sin(qc[0]), jnp.cos(qc[0])
+        sb, cb = jnp.sin(qc[1]), jnp.cos(qc[1])
+        sc, cc = jnp.sin(qc[2]), jnp.cos(qc[2])
+        sbcc = sb * cc
+        # Pointing axis u = R e_x = (cb cc, ca sb cc − sa sc, −sa sb cc − ca sc); x = d (−u2, u3).
+        x1 = -d * (ca * sbcc - sa * sc)
+        x2 = -d * (sa * sbcc + ca * sc)
+        dcbcc = d * cb * cc
+        J = jnp.stack(
+            [
+                jnp.stack([-x2, -ca * dcbcc, d * (ca * sb * sc + sa * cc)]),
+                jnp.stack([x1, -sa * dcbcc, d * (sa * sb * sc - ca * cc)]),
+            ]
+        )
+        return jnp.stack([x1, x2]), J
+
+    def reachable(self, x):
+        r = np.linalg.norm(np.asarray(x, dtype=float), axis=-1)
+        return r <= float(self.d) * np.sin(self.max_angle)
+
+    def workspace_description(self):
+        return f"|x| <= d*sin({np.rad2deg(self.max_angle):.0f}°) = {float(self.d) * np.sin(self.max_angle):.4g} m"
+
+    def rotation(self, q):
+        """Hand orientation ``R(q)`` (..., 3, 3) of Eq 6."""
+        q = jnp.asarray(q)
+        a, b, c = q[..., 0], q[..., 1], q[..., 2]
+        return _rx(-a) @ _rz(b) @ _ry(c)
+
+
+def _rot(c, s, axis):
+    o, z = jnp.ones_like(c), jnp.zeros_like(c)
+    rows = {
+        0: [[o, z, z], [z, c, -s], [z, s, c]],
+        1: [[c, z, s], [z, o, z], [-s, z, c]],
+        2: [[c, -s, z], [s, c, z], [z, z, o]],
+    }[axis]
+    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def _rx(t):
+    return _rot(jnp.cos(t), jnp.sin(t), 0)
+
+
+def _ry(t):
+    return _rot(jnp.cos(t), jnp.sin(t), 1)
+
+
+def _rz(t):
+    return _rot(jnp.cos(t), jnp.sin(t), 2)
+
+
+@pytree_dataclass
+class PlanarArm(Chain):
+    """Planar n-link arm with hand position ``x`` (2,) [m]; ``lengths`` (n,) [m], joints relative."""
+
+    lengths: jax.Array
+    n: int = static_field(default=0)
+    m: int = static_field(default=2)
+
+    def __init__(self, lengths):
+        lengths = as_array("lengths", lengths, tail=(None,))
+        if np.ndim(lengths) != 1 or np.shape(lengths)[0] < 2:
+            raise ValueError(f"`lengths` must be a 1-D array of >= 2 link lengths, got {np.shape(lengths)}")
+        check_positive("lengths", lengths)
+        object.__setattr__(self, "lengths", jnp.asarray(lengths, dtype=float))
+        object.__setattr__(self, "n", int(np.shape(lengths)[0]))
+        object.__setattr__(self, "m", 2)
+
+    def fk_jac_soa(self, qc):
+        phi = jnp.cumsum(qc, axis=0)
+        L = self.lengths.reshape((self.n,) + (1,) * (qc.ndim - 1))
+        lc, ls = L * jnp.cos(phi), L * jnp.sin(phi)
+        x = jnp.stack([lc.sum(0), ls.sum(0)])
+        # Column j moves every link from j outward: reverse cumulative sums.
+        tail_c = jnp.flip(jnp.cumsum(jnp.flip(lc, 0), 0), 0)
+        tail_s = jnp.flip(jnp.cumsum(jnp.flip(ls, 0), 0), 0)
+        return x, jnp.stack([-tail_s, tail_c])
+
+    def reachable(self, x):
+        L = np.asarray(self.lengths)
+        r = np.linalg.norm(np.asarray(x, dtype=float), axis=-1)
+        inner = max(0.0, 2 * L.max() - L.sum())
+        return (r <= 0.999 * L.sum()) & (r >= inner + 1e-3 * L.sum())
+
+    def workspace_description(self):
+        L = np.asarray(self.lengths)
+        return f"annulus {max(0.0, 2 * L.max() - L.sum()):.3g} m < |x| < {L.sum():.3g} m"
+
+
+@pytree_dataclass
+class FunctionChain(Chain):
+    """Chain from a user JAX function ``fk(q)`` (n,) -> (m,); Jacobian by ``jax.jacfwd``.
+
+    ``reach`` optionally maps task points (..., m) to a boolean mask of reachable points.
+    """
+
+    fn: Callable = static_field()
+    n: int = static_field()
+    m: int = static_field()
+    reach: Callable | None = static_field(default=None)
+
+    def __post_init__(self):
+        if not callable(self.fn):
+            raise TypeError("`fn` must be callable: fk(q) with q of shape (n,)")
+        out = jax.eval_shape(self.fn, jax.ShapeDtypeStruct((self.n,), jnp.float64))
+        if out.shape != (self.m,):
+            raise ValueError(f"`fn` must map (n,)=({self.n},) to (m,)=({self.m},), got {out.shape}")
+
+    def fk_jac_soa(self, qc):
+        flat = qc.reshape(self.n, -1).T
+        x = jax.vmap(self.fn)(flat)
+        J = jax.vmap(jax.jacfwd(self.fn))(flat)
+        batch = qc.shape[1:]
+        return x.T.reshape((self.m,) + batch), jnp.moveaxis(J, 0, -1).reshape((self.m, self.n) + batch)
+
+    def reachable(self, x):
+        if self.reach is None:
+            return super().reachable(x)
+        return np.asarray(self.reach(np.asarray(x)), dtype=bool)

@@ -1,0 +1,92 @@
+"""Small dense linear algebra on component-leading arrays.
+
+Matrices are stored as ``(rows, cols, *batch)`` and vectors as ``(rows, *batch)``: the small
+dimensions lead and the batch trails, so every operation below is a handful of elementwise
+multiply-adds over contiguous batch arrays that XLA fuses into one loop (no batched tiny GEMMs,
+no LAPACK calls inside the time loop). Sizes are static and loops unroll at trace time.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def mv(A, v):
+    """``A @ v`` for ``A`` (r, k, ...) and ``v`` (k, ...) -> (r, ...)."""
+    return jnp.stack([sum(A[i, j] * v[j] for j in range(A.shape[1])) for i in range(A.shape[0])])
+
+
+def mtv(A, v):
+    """``A.T @ v`` for ``A`` (k, r, ...) and ``v`` (k, ...) -> (r, ...)."""
+    return jnp.stack([sum(A[j, i] * v[j] for j in range(A.shape[0])) for i in range(A.shape[1])])
+
+
+def mm(A, B):
+    """``A @ B`` for ``A`` (r, k, ...) and ``B`` (k, c, ...) -> (r, c, ...)."""
+    r, k = A.shape[:2]
+    c = B.shape[1]
+    return jnp.stack(
+        [jnp.stack([sum(A[i, p] * B[p, j] for p in range(k)) for j in range(c)]) for i in range(r)]
+    )
+
+
+def spd_solve(M, b):
+    """Solve ``M y = b`` for symmetric positive definite ``M`` (m, m, ...), ``b`` (m, ...).
+
+    Closed forms for m <= 2, an unrolled LDLᵀ factorisation otherwise (no pivoting: SPD).
+    """
+    m = M.shape[0]
+    if m == 1:
+        return b / M[0]
+    if m == 2:
+        a, c, d = M[0, 0], M[0, 1], M[1, 1]
+        inv_det = 1.0 / (a * d - c * c)
+        return jnp.stack([(d * b[0] - c * b[1]) * inv_det, (a * b[1] - c * b[0]) * inv_det])
+    L = [[None] * m for _ in range(m)]
+    D = [None] * m
+    for j in range(m):
+        D[j] = M[j, j] - sum(L[j][k] * L[j][k] * D[k] for k in range(j))
+        for i in range(j + 1, m):
+            L[i][j] = (M[i, j] - sum(L[i][k] * L[j][k] * D[k] for k in range(j))) / D[j]
+    y = [None] * m
+    for i in range(m):
+        y[i] = b[i] - sum(L[i][k] * y[k] for k in range(i))
+    z = [y[i] / D[i] for i in range(m)]
+    x = [None] * m
+    for i in reversed(range(m)):
+        x[i] = z[i] - sum(L[k][i] * x[k] for k in range(i + 1, m))
+    return jnp.stack(x)
+
+
+def spd_inv(M):
+    """Inverse of SPD ``M`` (m, m, ...), column by column through :func:`spd_solve`."""
+    m = M.shape[0]
+    eye = jnp.eye(m, dtype=M.dtype).reshape((m, m) + (1,) * (M.ndim - 2))
+    cols = [spd_solve(M, jnp.broadcast_to(eye[:, j], M.shape[1:])) for j in range(m)]
+    return jnp.stack(cols, axis=1)
+
+
+def det(M):
+    """Determinant of a small square ``M`` (m, m, ...) by cofactor expansion (m <= 3) or LU."""
+    m = M.shape[0]
+    if m == 1:
+        return M[0, 0]
+    if m == 2:
+        return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    if m == 3:
+        return (
+            M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+            - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+            + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0])
+        )
+    return jnp.linalg.det(jnp.moveaxis(M, (0, 1), (-2, -1)))
+
+
+def to_soa(x, k: int = 1):
+    """Move the last ``k`` (component) axes of ``x`` to the front."""
+    return jnp.moveaxis(x, tuple(range(x.ndim - k, x.ndim)), tuple(range(k)))
+
+
+def from_soa(x, k: int = 1):
+    """Inverse of :func:`to_soa`."""
+    return jnp.moveaxis(x, tuple(range(k)), tuple(range(x.ndim - k, x.ndim)))

@@ -1,0 +1,143 @@
+"""PMP1, PMP2 and λ0-PMP (Figure 1B, Eqs 3–5) as pytrees holding ``KJ``, ``q_rest``, ``W``.
+
+Velocity fields, with ``A = W⁻¹``, ``τ_el = KJ (q − q_rest)`` and task force ``F``:
+
+- PMP1:    ``q̇ = A Jᵀ F``
+- PMP2:    ``q̇ = A (Jᵀ F − τ_el)``
+- λ0-PMP:  ``q̇ = A (Jᵀ (F + λ0) − τ_el)``, ``λ0 = B J A τ_el`` (Eq 4), hence ``B ẋ = F`` (Eq 5).
+
+(The λ0-PMP field equals ``J#_W B⁻¹ F − (I − J#_W J) A τ_el``: note ``B⁻¹ F``, not ``F``.)
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._kinematics import Chain
+from ._linalg import mv, spd_inv, to_soa
+from ._pytree import pytree_dataclass, static_field
+from ._redundancy import admittance_terms_soa, lambda0_soa
+from ._validate import as_array, check_positive, check_spd
+
+
+class _PMP:
+    chain: Chain
+    KJ: jax.Array | None
+    q_rest: jax.Array | None
+    W: jax.Array
+    elastic: bool = False
+    blocked: bool = False
+
+    def _validate(self):
+        if not isinstance(self.chain, Chain):
+            raise TypeError(f"`chain` must be a pmpjax Chain, got {type(self.chain).__name__}")
+        n = self.chain.n
+        object.__setattr__(self, "W", jnp.asarray(as_array("W", self.W, tail=(n, n)), float))
+        check_spd("W", self.W)
+        if self.elastic:
+            KJ = as_array("KJ", self.KJ, tail=(n, n))
+            check_spd("KJ", KJ)
+            q_rest = as_array("q_rest", self.q_rest, tail=(n,))
+            object.__setattr__(self, "KJ", jnp.asarray(KJ, float))
+            object.__setattr__(self, "q_rest", jnp.asarray(q_rest, float))
+
+    def batch_shape(self) -> tuple[int, ...]:
+        shapes = [jnp.shape(self.W)[:-2]]
+        if self.elastic:
+            shapes += [jnp.shape(self.KJ)[:-2], jnp.shape(self.q_rest)[:-1]]
+        return tuple(np.broadcast_shapes(*shapes))
+
+    def prepare_soa(self, batch):
+        """Per-trajectory constants, component-leading with trailing ``batch``: ``A``, ``G``, ``q_rest``."""
+        n = self.chain.n
+        A = spd_inv(to_soa(jnp.broadcast_to(self.W, batch + (n, n)), 2))
+        if not self.elastic:
+            return {"A": A}
+        # G = A KJ, so that A τ_el = G (q − q_rest) costs one mat-vec per evaluation.
+        KJ = to_soa(jnp.broadcast_to(self.KJ, batch + (n, n)), 2)
+        G = jnp.stack([jnp.stack([sum(A[i, k] * KJ[k, j] for k in range(n)) for j in range(n)]) for i in range(n)])
+        return {"A": A, "G": G, "q_rest": to_soa(jnp.broadcast_to(self.q_rest, batch + (n,)))}
+
+    def qdot_soa(self, J, P, M, F, qc, consts):
+        """Joint velocity (n, ...) from task force ``F`` (m, ...) and ``P = A Jᵀ``, ``M = B⁻¹``."""
+        if not self.elastic:
+            return mv(P, F)
+        g = mv(consts["G"], qc - consts["q_rest"])  # A τ_el
+        if self.blocked:
+            F = F + lambda0_soa(J, M, g)
+        return mv(P, F) - g
+
+    def velocity(self, q, F):
+        """Joint velocity ``q̇`` (..., n) at ``q`` (..., n) under task force ``F`` (..., m)."""
+        q = jnp.asarray(q)
+        F = jnp.asarray(F)
+        batch = tuple(np.broadcast_shapes(q.shape[:-1], F.shape[:-1], self.batch_shape()))
+        qc = to_soa(jnp.broadcast_to(q, batch + q.shape[-1:]))
+        consts = self.prepare_soa(batch)
+        _, J = self.chain.fk_jac_soa(qc)
+        P, M = admittance_terms_soa(J, consts["A"])
+        Fc = to_soa(jnp.broadcast_to(F, batch + F.shape[-1:]))
+        return jnp.moveaxis(self.qdot_soa(J, P, M, Fc, qc, consts), 0, -1)
+
+
+@pytree_dataclass
+class PMP1(_PMP):
+    """Purely viscous PMP: ``q̇ = W⁻¹ Jᵀ F``. Solves redundancy, path-dependent postures."""
+
+    chain: Chain
+    W: jax.Array
+    KJ: None = static_field(default=None)
+    q_rest: None = static_field(default=None)
+    elastic: bool = static_field(default=False)
+    blocked: bool = static_field(default=False)
+
+    def __post_init__(self):
+        self._validate()
+
+
+@pytree_dataclass
+class PMP2(_PMP):
+    """Visco-elastic PMP: ``q̇ = W⁻¹ (Jᵀ F − KJ (q − q_rest))``. Unique postures, misses targets."""
+
+    chain: Chain
+    KJ: jax.Array
+    q_rest: jax.Array
+    W: jax.Array
+    elastic: bool = static_field(default=True)
+    blocked: bool = static_field(default=False)
+
+    def __post_init__(self):
+        self._validate()
+
+
+@pytree_dataclass
+class Lambda0PMP(_PMP):
+    """λ0-PMP (Eq 4–5): reaches the target and ends in the energy-minimising posture (Donders).
+
+    ``chain``: a Chain; ``KJ`` (..., n, n) SPD joint stiffness [Nm/rad]; ``q_rest`` (..., n) rest
+    posture [rad]; ``W`` (..., n, n) SPD joint damping [Nm s/rad]. Leading axes batch.
+    """
+
+    chain: Chain
+    KJ: jax.Array
+    q_rest: jax.Array
+    W: jax.Array
+    elastic: bool = static_field(default=True)
+    blocked: bool = static_field(default=True)
+
+    def __post_init__(self):
+        self._validate()
+
+
+def damping_from_stiffness(KJ, tau0):
+    """``W = τ0 KJ`` (Eq 7): damping proportional to stiffness, intrinsic time constant τ0 [s]."""
+    check_positive("tau0", tau0)
+    return jnp.asarray(tau0)[..., None, None] * jnp.asarray(KJ)
+
+
+def normalize_trace(KJ, trace: float = 4.0):
+    """Scale ``KJ`` (..., n, n) to ``trace(KJ) = trace`` (paper: 4 Nm/rad; only ratios matter)."""
+    KJ = jnp.asarray(KJ)
+    return KJ * (trace / jnp.trace(KJ, axis1=-2, axis2=-1))[..., None, None]

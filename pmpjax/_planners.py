@@ -1,0 +1,142 @@
+"""Task planners: the extrinsic force ``F = K(t) (x_d − x)`` that pulls the hand to the target.
+
+Each planner is a pytree with ``gain(t)`` (scalar stiffness [N/m], time reset to 0 at each new
+target) and ``force_soa``. ``start(model, M0)`` resolves parameters that depend on the start
+posture (Eq 10) and is called once per movement.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._linalg import spd_solve
+from ._pytree import pytree_dataclass, replace, static_field
+from ._validate import check_positive
+
+
+class Planner:
+    """Base: isotropic gain; ``F = gain(t) (x_d − x)``."""
+
+    def gain(self, t):
+        raise NotImplementedError
+
+    def start(self, M0):
+        """Resolve start-dependent parameters from ``M0 = B(q0)⁻¹`` (m, m, ...)."""
+        return self
+
+    def force_soa(self, t, x, target, M):
+        return self.gain(t) * (target - x)
+
+    def max_gain(self):
+        """Upper bound of ``gain(t)`` (used for the RK4 stability check)."""
+        raise NotImplementedError
+
+    def batch_shape(self):
+        return tuple(np.broadcast_shapes(*[jnp.shape(v) for v in self._leaves()]))
+
+    def _leaves(self):
+        return []
+
+    def to_soa(self, batch):
+        """Broadcast leaves to ``batch`` and flatten like the state (see ``_simulate``)."""
+        import jax
+
+        return jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, batch).reshape(-1), self)
+
+
+@pytree_dataclass
+class ConstantPlanner(Planner):
+    """Constant isotropic stiffness ``K = k I`` [N/m]: exponential (first-order) approach."""
+
+    k: float
+
+    def __post_init__(self):
+        check_positive("k", self.k)
+
+    def gain(self, t):
+        return self.k
+
+    def max_gain(self):
+        return np.max(np.asarray(self.k))
+
+    def _leaves(self):
+        return [self.k]
+
+
+def eq10_gain(M0, tau0):
+    """``k = b_max / τ0`` (Eq 10) from ``M0 = B(q0)⁻¹`` (m, m, ...): ``b_max = 1/λ_min(M0)``."""
+    Mt = jnp.moveaxis(M0, (0, 1), (-2, -1))
+    lam_min = jnp.linalg.eigvalsh(Mt)[..., 0]
+    return 1.0 / (lam_min * tau0)
+
+
+@pytree_dataclass
+class ArimotoPlanner(Planner):
+    """Arimoto stiffness ``K(t) = k (1 − e^{−t/τ} − (t/τ) e^{−t/τ}) I`` (Eq 8).
+
+    ``k`` [N/m] and extrinsic time constant ``tau`` [s]. With ``k=None`` and ``tau0`` given, ``k``
+    is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``.
+    """
+
+    k: float | None
+    tau: float
+    tau0: float | None = None
+
+    def __post_init__(self):
+        check_positive("tau", self.tau)
+        if self.k is None:
+            if self.tau0 is None:
+                raise ValueError("ArimotoPlanner needs `k`, or `tau0` to set k by Eq 10")
+            check_positive("tau0", self.tau0)
+        else:
+            check_positive("k", self.k)
+
+    def start(self, M0):
+        if self.k is None:
+            return replace(self, k=eq10_gain(M0, self.tau0))
+        return self
+
+    def gain(self, t):
+        s = t / self.tau
+        return self.k * (1.0 - (1.0 + s) * jnp.exp(-s))
+
+    def max_gain(self):
+        return None if self.k is None else np.max(np.asarray(self.k))
+
+    def _leaves(self):
+        return [v for v in (self.k, self.tau, self.tau0) if v is not None]
+
+
+@pytree_dataclass
+class MinimumJerkPlanner(Planner):
+    """Time-base generator (Morasso et al. 2010) in task-velocity form.
+
+    ``F = γ(t) B(q) (x_d − x)`` so that, along the λ0-PMP (``B ẋ = F``), ``ẋ = γ(t)(x_d − x)`` and
+    the hand follows the straight line with the minimum-jerk profile ``ξ(t/T)``, reaching the
+    target at ``t = T``: ``γ = ξ̇ / (1 − ξ)``, capped at ``gain_cap`` [1/s] near and after ``T``.
+    """
+
+    duration: float
+    gain_cap: float = 200.0
+    task_velocity: bool = static_field(default=True)
+
+    def __post_init__(self):
+        check_positive("duration", self.duration)
+        check_positive("gain_cap", self.gain_cap)
+
+    def gain(self, t):
+        s = jnp.clip(t / self.duration, 0.0, 1.0)
+        xi = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
+        dxi = 30.0 * s**2 * (1.0 - s) ** 2 / self.duration
+        one_minus = jnp.maximum(1.0 - xi, 1e-12)
+        return jnp.where(s < 1.0, jnp.minimum(dxi / one_minus, self.gain_cap), self.gain_cap)
+
+    def force_soa(self, t, x, target, M):
+        return spd_solve(M, self.gain(t) * (target - x))
+
+    def max_gain(self):
+        return np.max(np.asarray(self.gain_cap))
+
+    def _leaves(self):
+        return [self.duration, self.gain_cap]

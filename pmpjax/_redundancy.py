@@ -1,0 +1,92 @@
+"""Redundancy operators of a weighted pseudo-inverse (Eqs 3–4): the one implementation.
+
+With admittance ``A = W⁻¹`` (n×n SPD) and Jacobian ``J`` (m×n):
+``B = (J A Jᵀ)⁻¹`` task damping, ``J#_W = A Jᵀ B``, null-space projector ``N = I − J#_W J``,
+``λ0 = B J A τ_el``. The ``*_soa`` kernels work on component-leading arrays (see ``_linalg``) and
+are what integrators and fits call; the public functions take batch-leading arrays
+(``J`` (..., m, n), ``W`` (..., n, n) or diagonal weights ``w`` (..., n)).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ._linalg import from_soa, mm, mv, spd_inv, spd_solve, to_soa
+
+
+def admittance_terms_soa(J, A):
+    """``P = A Jᵀ`` (n, m, ...) and ``M = J A Jᵀ = B⁻¹`` (m, m, ...)."""
+    P = mm(A, jnp.swapaxes(J, 0, 1))
+    return P, mm(J, P)
+
+
+def pinv_soa(J, A):
+    """Weighted pseudo-inverse ``J#_W = A Jᵀ (J A Jᵀ)⁻¹`` (n, m, ...)."""
+    P, M = admittance_terms_soa(J, A)
+    return mm(P, spd_inv(M))
+
+
+def lambda0_soa(J, M, A_tau):
+    """``λ0 = B J A τ_el`` (m, ...) given ``M = B⁻¹`` and ``A τ_el`` (n, ...) (Eq 4)."""
+    return spd_solve(M, mv(J, A_tau))
+
+
+def _admittance(J, W, w):
+    n = J.shape[-1]
+    if (W is None) == (w is None):
+        raise ValueError("give exactly one of `W` (..., n, n) or diagonal weights `w` (..., n)")
+    if w is not None:
+        w = jnp.asarray(w)
+        if w.shape[-1:] != (n,):
+            raise ValueError(f"`w` must have trailing shape ({n},), got {w.shape}")
+        return to_soa(jnp.eye(n) / w[..., None, :], 2)
+    W = jnp.asarray(W)
+    if W.shape[-2:] != (n, n):
+        raise ValueError(f"`W` must have trailing shape ({n}, {n}), got {W.shape}")
+    return spd_inv(to_soa(W, 2))
+
+
+def _check_J(J):
+    J = jnp.asarray(J)
+    if J.ndim < 2:
+        raise ValueError(f"`J` must have shape (..., m, n), got {J.shape}")
+    if J.shape[-2] > J.shape[-1]:
+        raise ValueError(f"`J` must be wide (m <= n), got shape {J.shape}")
+    return J
+
+
+def _bcast(J, A):
+    batch = jnp.broadcast_shapes(J.shape[2:], A.shape[2:])
+    return jnp.broadcast_to(J, J.shape[:2] + batch), jnp.broadcast_to(A, A.shape[:2] + batch)
+
+
+def weighted_pinv(J, W=None, *, w=None):
+    """W-weighted pseudo-inverse ``W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` (..., n, m) (Eq 3)."""
+    J = _check_J(J)
+    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
+    return from_soa(pinv_soa(Js, A), 2)
+
+
+def nullspace_projector(J, W=None, *, w=None):
+    """``I − J#_W J`` (..., n, n): projects joint velocities onto motions that leave x still."""
+    J = _check_J(J)
+    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
+    n = J.shape[-1]
+    eye = jnp.eye(n).reshape((n, n) + (1,) * (Js.ndim - 2))
+    return from_soa(eye - mm(pinv_soa(Js, A), Js), 2)
+
+
+def task_damping(J, W=None, *, w=None):
+    """Task-space damping ``B = (J W⁻¹ Jᵀ)⁻¹`` (..., m, m) (Eq 3)."""
+    J = _check_J(J)
+    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
+    return from_soa(spd_inv(admittance_terms_soa(Js, A)[1]), 2)
+
+
+def lambda0(J, W, tau_el):
+    """Task force ``λ0 = B J W⁻¹ τ_el`` (..., m) that blocks ``τ_el`` (..., n) in task space (Eq 4)."""
+    J = _check_J(J)
+    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, None))
+    tau = to_soa(jnp.broadcast_to(jnp.asarray(tau_el), J.shape[:-2] + J.shape[-1:]))
+    P, M = admittance_terms_soa(Js, A)
+    return from_soa(lambda0_soa(Js, M, mv(A, tau)))

@@ -1,0 +1,249 @@
+"""``simulate``: batched, differentiable PMP movements and movement sequences."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._integrate import integrate
+from ._linalg import det, mm, mv, to_soa
+from ._models import _PMP
+from ._planners import Planner
+from ._pytree import pytree_dataclass, replace
+from ._redundancy import admittance_terms_soa
+from ._validate import as_array, is_concrete
+
+OK, NONFINITE, SINGULAR = 0, 1, 2
+
+
+@dataclasses.dataclass(frozen=True)
+class SaveAt:
+    """Where to save: every ``every``-th RK4 step (default every step, with t = 0 included),
+    at given times ``ts`` (strictly increasing in [0, duration]), or only at the end (``final``).
+    """
+
+    every: int | None = None
+    ts: tuple[float, ...] | None = None
+    final: bool = False
+
+    def __post_init__(self):
+        given = (self.every is not None) + (self.ts is not None) + bool(self.final)
+        if given > 1:
+            raise ValueError("SaveAt takes one of `every`, `ts`, `final`")
+        if self.every is not None and (int(self.every) != self.every or self.every < 1):
+            raise ValueError(f"`SaveAt.every` must be a positive integer, got {self.every}")
+        if self.ts is not None:
+            ts = np.asarray(self.ts, dtype=float).reshape(-1)
+            if ts.size == 0 or not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0) or ts[0] < 0:
+                raise ValueError("`SaveAt.ts` must be finite, non-negative and strictly increasing")
+            object.__setattr__(self, "ts", tuple(float(v) for v in ts))
+
+
+@pytree_dataclass
+class Trajectory:
+    """Saved states. ``t`` (S,) [s] from the start of each movement; ``q`` (..., S, n) [rad];
+    ``x`` (..., S, m); ``qdot`` (..., S, n); ``xdot`` (..., S, m); ``manipulability`` (..., S)
+    (``sqrt(det J Jᵀ)``); ``status`` (...,) int: 0 ok, 1 non-finite, 2 passed within
+    ``singular_tol`` of a rank-deficient Jacobian. Sequences add an (M,) axis before S.
+    """
+
+    t: jax.Array
+    q: jax.Array
+    x: jax.Array
+    qdot: jax.Array
+    xdot: jax.Array
+    manipulability: jax.Array
+    status: jax.Array
+
+    @property
+    def speed(self):
+        """Tangential task speed ``|ẋ|`` (..., S)."""
+        return jnp.linalg.norm(self.xdot, axis=-1)
+
+    @property
+    def ok(self):
+        return self.status == OK
+
+
+@dataclasses.dataclass(frozen=True)
+class _Schedule:
+    n_steps: int
+    t0s: tuple[float, ...]
+    hs: tuple[float, ...]
+    include_initial: bool
+    t: tuple[float, ...]
+
+
+def _schedule(saveat: SaveAt, duration: float, dt: float) -> _Schedule:
+    total = max(1, math.ceil(duration / dt - 1e-9))
+    h = duration / total
+    if saveat.final:
+        return _Schedule(total, (0.0,), (h,), False, (duration,))
+    if saveat.ts is None:
+        every = saveat.every or 1
+        if total % every:
+            raise ValueError(
+                f"`saveat.every`={every} must divide the number of steps duration/dt = {total}"
+            )
+        S = total // every
+        t0s = tuple(i * every * h for i in range(S))
+        return _Schedule(every, t0s, (h,) * S, True, (0.0,) + tuple((i + 1) * every * h for i in range(S)))
+    ts = np.asarray(saveat.ts)
+    if ts[-1] > duration * (1 + 1e-12):
+        raise ValueError(f"`saveat.ts` goes beyond `duration`={duration}")
+    include0 = ts[0] == 0.0
+    ends = ts[1:] if include0 else ts
+    starts = np.concatenate([[0.0], ends[:-1]])
+    n_steps = max(1, math.ceil(np.max(ends - starts) / dt - 1e-9)) if ends.size else 1
+    return _Schedule(n_steps, tuple(starts), tuple((ends - starts) / n_steps), bool(include0), tuple(ts))
+
+
+def _check_scalar(name, v):
+    if isinstance(v, jax.core.Tracer):
+        raise ValueError(f"`{name}` must be a concrete Python float (it sets the step count)")
+    v = float(v)
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"`{name}` must be positive and finite, got {v}")
+    return v
+
+
+def _flat(x, batch, core):
+    x = jnp.asarray(x)
+    B = math.prod(batch)
+    return jnp.broadcast_to(x, batch + x.shape[x.ndim - core:]).reshape((B,) + x.shape[x.ndim - core:])
+
+
+def _check_stability(model, planner, q0, batch, h):
+    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
+    n = model.chain.n
+    consts = model.prepare_soa(batch)
+    _, J = model.chain.fk_jac_soa(to_soa(jnp.broadcast_to(q0, batch + (n,))))
+    M = admittance_terms_soa(J, consts["A"])[1]
+    lam = np.linalg.eigvalsh(np.moveaxis(np.asarray(M), (0, 1), (-2, -1)))
+    if np.any(lam[..., 0] <= 0):
+        raise ValueError("`q0` is at a singular posture: J W⁻¹ Jᵀ is not positive definite")
+    g = planner.max_gain()
+    if getattr(planner, "task_velocity", False):
+        rate = g
+    elif g is None:  # Eq 10: k λ_max(M) = cond(M) / τ0
+        rate = np.max(lam[..., -1] / lam[..., 0] / np.asarray(planner.tau0))
+    else:
+        rate = g * np.max(lam[..., -1])
+    if model.elastic:
+        G = np.moveaxis(np.asarray(consts["G"]), (0, 1), (-2, -1))
+        rate = max(rate, np.max(np.abs(np.linalg.eigvals(G))))
+    if rate * h > 2.5:
+        raise ValueError(
+            f"`dt`={h:.3g} s is too large for RK4: the fastest time constant at q0 is "
+            f"{1 / rate:.3g} s (need dt < {2.5 / rate:.3g} s)"
+        )
+
+
+def simulate_sequence(
+    model: _PMP,
+    planner: Planner,
+    q0,
+    targets,
+    *,
+    duration: float,
+    dt: float = 1e-3,
+    saveat: SaveAt | None = None,
+    singular_tol: float = 1e-4,
+) -> Trajectory:
+    """Simulate consecutive movements to ``targets`` (..., M, m), each lasting ``duration`` [s].
+
+    Each movement starts where the previous one ended, with the planner's time reset to 0 (and
+    Eq 10 gains recomputed at its start posture). ``q0`` (..., n) [rad]; leading axes of ``q0``,
+    ``targets`` and of the model's and planner's parameters broadcast together as a batch.
+    Returns a :class:`Trajectory` with leaves (..., M, S, ·). Differentiable with respect to every
+    array leaf and to ``q0``/``targets``; ``duration``, ``dt`` and ``saveat`` are static.
+    """
+    if not isinstance(model, _PMP):
+        raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
+    if not isinstance(planner, Planner):
+        raise TypeError(f"`planner` must be a pmpjax Planner, got {type(planner).__name__}")
+    chain = model.chain
+    n, m = chain.n, chain.m
+    q0 = jnp.asarray(as_array("q0", q0, tail=(n,)), float)
+    targets = jnp.asarray(as_array("targets", targets, tail=(None, m)), float)
+    chain.check_target("targets", targets)
+    duration = _check_scalar("duration", duration)
+    dt = _check_scalar("dt", dt)
+    sched = _schedule(saveat or SaveAt(), duration, dt)
+    batch = tuple(
+        np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
+    )
+    if is_concrete(model, planner, q0):
+        _check_stability(model, planner, q0, batch, max(sched.hs))
+    out = _run(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs),
+               batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
+               singular_tol=float(singular_tol))
+    return replace(out, t=jnp.asarray(sched.t))
+
+
+def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4):
+    """Simulate one movement (per batch element) from ``q0`` (..., n) to ``target`` (..., m).
+
+    See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
+    """
+    target = as_array("target", target, tail=(model.chain.m,))
+    traj = simulate_sequence(model, planner, q0, jnp.asarray(target)[..., None, :], duration=duration,
+                             dt=dt, saveat=saveat, singular_tol=singular_tol)
+    return replace(
+        traj, q=traj.q[..., 0, :, :], x=traj.x[..., 0, :, :], qdot=traj.qdot[..., 0, :, :],
+        xdot=traj.xdot[..., 0, :, :], manipulability=traj.manipulability[..., 0, :],
+    )
+
+
+@partial(jax.jit, static_argnames=("batch", "n_steps", "include_initial", "singular_tol"))
+def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initial, singular_tol):
+    chain = model.chain
+    n, m = chain.n, chain.m
+    B = math.prod(batch)
+    core = {"W": 2, "KJ": 2, "q_rest": 1}
+    model = replace(model, **{k: _flat(getattr(model, k), batch, c) for k, c in core.items()
+                              if getattr(model, k) is not None})
+    consts = model.prepare_soa((B,))
+    planner = planner.to_soa(batch)
+    q = to_soa(_flat(q0, batch, 1))
+    tg = jnp.moveaxis(_flat(targets, batch, 2), 0, -1)  # (M, m, B)
+
+    def field(t, qc, args):
+        pl, target = args
+        x, J = chain.fk_jac_soa(qc)
+        P, M = admittance_terms_soa(J, consts["A"])
+        return model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
+
+    def save(t, qc, args):
+        pl, target = args
+        x, J = chain.fk_jac_soa(qc)
+        P, M = admittance_terms_soa(J, consts["A"])
+        qd = model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
+        w = jnp.sqrt(jnp.maximum(det(mm(J, jnp.swapaxes(J, 0, 1))), 0.0))
+        return qc, x, qd, mv(J, qd), w
+
+    def movement(qc, target):
+        _, J0 = chain.fk_jac_soa(qc)
+        pl = planner.start(admittance_terms_soa(J0, consts["A"])[1])
+        qT, saved = integrate(field, qc, t0s, hs, n_steps, (pl, target), save)
+        if include_initial:
+            s0 = save(jnp.zeros(()), qc, (pl, target))
+            saved = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), s0, saved)
+        return qT, saved
+
+    qT, (qs, xs, qds, xds, ws) = jax.lax.scan(movement, q, tg)
+    # (M, S, comp, B) -> (*batch, M, S, comp)
+    back = lambda a: jnp.moveaxis(a, -1, 0).reshape(batch + a.shape[:-1])  # noqa: E731
+    fin = jnp.all(jnp.isfinite(qs), axis=(0, 1, 2)) & jnp.all(jnp.isfinite(qT), axis=0)
+    sing = jnp.min(jnp.where(jnp.isfinite(ws), ws, 0.0), axis=(0, 1)) < singular_tol
+    status = jnp.where(~fin, NONFINITE, jnp.where(sing, SINGULAR, OK)).reshape(batch)
+    return Trajectory(
+        t=t0s, q=back(qs), x=back(xs), qdot=back(qds), xdot=back(xds),
+        manipulability=jnp.moveaxis(ws, -1, 0).reshape(batch + ws.shape[:-1]), status=status,
+    )
+

@@ -1,0 +1,68 @@
+"""Python-side input checks, run before tracing. Value checks are skipped for tracers."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import numpy as np
+
+
+def is_concrete(*xs: Any) -> bool:
+    """True when no leaf is a JAX tracer (so values can be inspected in Python)."""
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
+
+
+def as_array(name: str, x: Any, *, tail: tuple[int | None, ...] = (), finite: bool = True):
+    """Convert ``x`` to a float array with trailing shape ``tail`` (``None`` = any size).
+
+    Raises ``ValueError`` naming ``name`` on wrong rank/shape or NaN/inf (when concrete).
+    """
+    if x is None:
+        raise ValueError(f"`{name}` is required, got None")
+    if not isinstance(x, jax.Array | np.ndarray):
+        try:
+            x = np.asarray(x, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"`{name}` must be numeric, got {type(x).__name__}") from e
+    shape = tuple(x.shape)
+    if len(shape) < len(tail):
+        raise ValueError(f"`{name}` must have trailing shape {_fmt(tail)}, got shape {shape}")
+    for got, want in zip(shape[len(shape) - len(tail):], tail):
+        if want is not None and got != want:
+            raise ValueError(f"`{name}` must have trailing shape {_fmt(tail)}, got shape {shape}")
+    if finite and is_concrete(x) and not np.all(np.isfinite(np.asarray(x))):
+        raise ValueError(f"`{name}` contains NaN or inf")
+    return x
+
+
+def check_spd(name: str, M: Any, *, rtol: float = 1e-8) -> None:
+    """Require ``M`` (..., n, n) symmetric positive definite (only when concrete)."""
+    if not is_concrete(M):
+        return
+    a = np.asarray(M, dtype=float)
+    if a.ndim < 2 or a.shape[-1] != a.shape[-2]:
+        raise ValueError(f"`{name}` must be a square (..., n, n) matrix, got shape {a.shape}")
+    scale = np.max(np.abs(a), axis=(-1, -2), keepdims=True) + 1e-300
+    if np.any(np.abs(a - np.swapaxes(a, -1, -2)) > rtol * scale):
+        raise ValueError(f"`{name}` must be symmetric")
+    eig = np.linalg.eigvalsh(a)
+    if np.any(eig <= 0):
+        raise ValueError(
+            f"`{name}` must be positive definite; smallest eigenvalue {eig.min():.3g}"
+        )
+
+
+def check_positive(name: str, x: Any) -> None:
+    """Require every entry of ``x`` strictly positive and finite (only when concrete)."""
+    if x is None or not is_concrete(x):
+        return
+    a = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"`{name}` contains NaN or inf")
+    if np.any(a <= 0):
+        raise ValueError(f"`{name}` must be positive, got {a.min() if a.size else a}")
+
+
+def _fmt(tail: tuple[int | None, ...]) -> str:
+    return "(..., " + ", ".join("?" if t is None else str(t) for t in tail) + ")"
