@@ -44,6 +44,8 @@ def integrate(
     def segment(y, seg):
         t0, h = seg
 
+        # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
+        @jax.checkpoint
         def step(y, i):
             return rk4_step(f, t0 + i * h, y, h, args), None
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from ._linalg import det, from_soa, mm, to_soa
 from ._pytree import pytree_dataclass, static_field
+from ._trig import sincos
 from ._validate import as_array, check_positive, is_concrete
 
 
@@ -90,9 +91,7 @@ class Wrist(Chain):
 
     def fk_jac_soa(self, qc):
         d = self.d
-        sa, ca = jnp.sin(qc[0]), jnp.cos(qc[0])
-        sb, cb = jnp.sin(qc[1]), jnp.cos(qc[1])
-        sc, cc = jnp.sin(qc[2]), jnp.cos(qc[2])
+        (sa, sb, sc), (ca, cb, cc) = sincos(qc)
         sbcc = sb * cc
         # Pointing axis u = R e_x = (cb cc, ca sb cc − sa sc, −sa sb cc − ca sc); x = d (−u2, u3).
         x1 = -d * (ca * sbcc - sa * sc)
@@ -162,7 +161,8 @@ class PlanarArm(Chain):
     def fk_jac_soa(self, qc):
         phi = jnp.cumsum(qc, axis=0)
         L = self.lengths.reshape((self.n,) + (1,) * (qc.ndim - 1))
-        lc, ls = L * jnp.cos(phi), L * jnp.sin(phi)
+        s, c = sincos(phi)
+        lc, ls = L * c, L * s
         x = jnp.stack([lc.sum(0), ls.sum(0)])
         # Column j moves every link from j outward: reverse cumulative sums.
         tail_c = jnp.flip(jnp.cumsum(jnp.flip(lc, 0), 0), 0)

@@ -15,6 +15,12 @@ from ._pytree import pytree_dataclass, replace, static_field
 from ._validate import check_positive
 
 
+def _scale(gain, e):
+    """``gain`` (*batch) or scalar times component-leading ``e`` (m, *batch)."""
+    gain = jnp.asarray(gain)
+    return (gain[None] if gain.ndim else gain) * e
+
+
 class Planner:
     """Base: isotropic gain; ``F = gain(t) (x_d − x)``."""
 
@@ -26,7 +32,7 @@ class Planner:
         return self
 
     def force_soa(self, t, x, target, M):
-        return self.gain(t) * (target - x)
+        return _scale(self.gain(t), target - x)
 
     def max_gain(self):
         """Upper bound of ``gain(t)`` (used for the RK4 stability check)."""
@@ -133,7 +139,7 @@ class MinimumJerkPlanner(Planner):
         return jnp.where(s < 1.0, jnp.minimum(dxi / one_minus, self.gain_cap), self.gain_cap)
 
     def force_soa(self, t, x, target, M):
-        return spd_solve(M, self.gain(t) * (target - x))
+        return spd_solve(M, _scale(self.gain(t), target - x))
 
     def max_gain(self):
         return np.max(np.asarray(self.gain_cap))

@@ -118,13 +118,21 @@ def _flat(x, batch, core):
     return jnp.broadcast_to(x, batch + x.shape[x.ndim - core:]).reshape((B,) + x.shape[x.ndim - core:])
 
 
-def _check_stability(model, planner, q0, batch, h):
-    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
+@partial(jax.jit, static_argnames=("batch",))
+def _rates(model, q0, *, batch):
+    """Eigenvalues of ``M = B(q0)⁻¹`` (*batch, m) and the largest |eig| of ``A KJ`` (elastic)."""
     n = model.chain.n
     consts = model.prepare_soa(batch)
     _, J = model.chain.fk_jac_soa(to_soa(jnp.broadcast_to(q0, batch + (n,))))
     M = admittance_terms_soa(J, consts["A"])[1]
-    lam = np.linalg.eigvalsh(np.moveaxis(np.asarray(M), (0, 1), (-2, -1)))
+    lam = jnp.linalg.eigvalsh(jnp.moveaxis(M, (0, 1), (-2, -1)))
+    g = jnp.max(jnp.abs(jnp.linalg.eigvals(jnp.moveaxis(consts["G"], (0, 1), (-2, -1))))) if model.elastic else 0.0
+    return lam, g
+
+
+def _check_stability(model, planner, q0, batch, h):
+    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
+    lam, g_null = (np.asarray(v) for v in _rates(model, q0, batch=batch))
     if np.any(lam[..., 0] <= 0):
         raise ValueError("`q0` is at a singular posture: J W⁻¹ Jᵀ is not positive definite")
     g = planner.max_gain()
@@ -134,9 +142,7 @@ def _check_stability(model, planner, q0, batch, h):
         rate = np.max(lam[..., -1] / lam[..., 0] / np.asarray(planner.tau0))
     else:
         rate = g * np.max(lam[..., -1])
-    if model.elastic:
-        G = np.moveaxis(np.asarray(consts["G"]), (0, 1), (-2, -1))
-        rate = max(rate, np.max(np.abs(np.linalg.eigvals(G))))
+    rate = max(float(rate), float(g_null))
     if rate * h > 2.5:
         raise ValueError(
             f"`dt`={h:.3g} s is too large for RK4: the fastest time constant at q0 is "

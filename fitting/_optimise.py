@@ -1,0 +1,112 @@
+"""The one optimiser loop: Levenberg–Marquardt for nonlinear least squares, jit/vmap friendly.
+
+``least_squares`` is written for one problem; batch it with ``jax.vmap`` (each item keeps its
+own damping, step count and convergence flag; finished items are frozen while others go on).
+Every fit in ``fitting`` (Donders/NIO, time constants, IK-weight gradient variant, primitives)
+goes through it. Jacobians of the residual by forward-mode autodiff (parameters are few).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from pmpjax._pytree import pytree_dataclass
+
+
+@pytree_dataclass
+class LeastSquaresResult:
+    """``x`` (p,) solution; ``cost`` ½|r|²; ``residual`` (N,); ``jac`` (N, p) at ``x``;
+    ``grad_norm`` |Jᵀr|_∞; ``steps`` iterations; ``converged`` bool (False also for non-finite)."""
+
+    x: jax.Array
+    cost: jax.Array
+    residual: jax.Array
+    jac: jax.Array
+    grad_norm: jax.Array
+    steps: jax.Array
+    converged: jax.Array
+
+
+def least_squares(
+    residual,
+    x0,
+    args=None,
+    *,
+    max_steps: int = 100,
+    gtol: float = 1e-10,
+    ftol: float = 1e-12,
+    xtol: float = 1e-12,
+    damping: float = 1e-3,
+) -> LeastSquaresResult:
+    """Minimise ``½ |residual(x, args)|²`` over ``x`` (p,) by Levenberg–Marquardt.
+
+    Marquardt scaling (damping on ``diag(JᵀJ)``) and Nielsen's damping update. Converged when
+    ``|Jᵀr|_∞ <= gtol``, or an accepted step changes the cost by ``<= ftol·cost``, or the step is
+    ``<= xtol (|x| + xtol)``. Non-finite trial residuals are rejected steps.
+    """
+    x0 = jnp.asarray(x0, dtype=jnp.result_type(float))
+    if x0.ndim != 1:
+        raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
+
+    def lin(x):
+        return residual(x, args), jax.jacfwd(residual)(x, args)
+
+    r0, J0 = lin(x0)
+    if r0.ndim != 1:
+        raise ValueError(f"`residual` must return a 1-D vector, got shape {r0.shape}")
+    cost0 = 0.5 * jnp.sum(r0**2)
+    finite0 = jnp.isfinite(cost0) & jnp.all(jnp.isfinite(J0))
+    state0 = dict(x=x0, r=r0, J=J0, cost=cost0, lam=jnp.asarray(damping), nu=jnp.asarray(2.0),
+                  step=jnp.asarray(0), done=~finite0, conv=jnp.asarray(False))
+
+    def cond(s):
+        return (~s["done"]) & (s["step"] < max_steps)
+
+    def body(s):
+        x, r, J, cost, lam, nu = s["x"], s["r"], s["J"], s["cost"], s["lam"], s["nu"]
+        g = J.T @ r
+        H = J.T @ J
+        d = jnp.maximum(jnp.diag(H), 1e-12 * jnp.max(jnp.diag(H)) + 1e-300)
+        delta = -jnp.linalg.solve(H + lam * jnp.diag(d), g)
+        x_new = x + delta
+        r_new, J_new = lin(x_new)
+        cost_new = 0.5 * jnp.sum(r_new**2)
+        pred = -(g @ delta + 0.5 * delta @ (H @ delta))
+        ok = jnp.isfinite(cost_new) & jnp.all(jnp.isfinite(J_new))
+        rho = jnp.where(ok & (pred > 0), (cost - cost_new) / jnp.where(pred > 0, pred, 1.0), -1.0)
+        accept = rho > 0
+        lam_acc = lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        small_step = jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(x) + xtol)
+        small_f = accept & (jnp.abs(cost - cost_new) <= ftol * cost)
+        x, r, J, cost = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(accept, a, b), (x_new, r_new, J_new, cost_new), (x, r, J, cost)
+        )
+        small_g = jnp.max(jnp.abs(J.T @ r)) <= gtol
+        conv = small_g | small_f | small_step
+        return dict(x=x, r=r, J=J, cost=cost, lam=jnp.where(accept, lam_acc, lam * nu),
+                    nu=jnp.where(accept, 2.0, 2.0 * nu), step=s["step"] + 1, done=conv, conv=conv)
+
+    s = lax.while_loop(cond, body, state0)
+    gn = jnp.max(jnp.abs(s["J"].T @ s["r"]))
+    conv = (s["conv"] | (gn <= gtol)) & jnp.isfinite(s["cost"])
+    return LeastSquaresResult(x=s["x"], cost=s["cost"], residual=s["r"], jac=s["J"], grad_norm=gn,
+                              steps=s["step"], converged=conv)
+
+
+def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):
+    """Gauss–Newton covariance ``σ² (JᵀJ)⁺`` with ``σ² = 2 cost / (N − p)``.
+
+    Returns ``(cov (p, p), stderr (p,), singular_values (p,), right_singular_vectors (p, p))``;
+    directions with singular value below ``rcond·s_max`` are unidentifiable (infinite variance is
+    replaced by the pseudo-inverse's zero there — check the singular values). Vmappable.
+    """
+    J = result.jac
+    N, p = J.shape
+    U, s, Vt = jnp.linalg.svd(J, full_matrices=False)
+    keep = s > rcond * s[0]
+    inv_s2 = jnp.where(keep, 1.0 / jnp.where(keep, s, 1.0) ** 2, 0.0)
+    sigma2 = 2.0 * result.cost / max(N - p, 1)
+    cov = sigma2 * (Vt.T * inv_s2[None, :]) @ Vt
+    return cov, jnp.sqrt(jnp.diag(cov)), s, Vt

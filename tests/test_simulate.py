@@ -1,0 +1,249 @@
+"""λ0-PMP, PMP1, PMP2 on the wrist against SciPy (solve_ivp, SLSQP) and finite differences."""
+
+import jax
+from jax.flatten_util import ravel_pytree
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.integrate
+import scipy.optimize
+from _reference import arimoto, pmp_qdot, wrist_fk, wrist_jac
+
+import pmpjax as pj
+
+# Table 1–2 subject 2 (off-diagonal stiffness) and the Figure 3 example.
+KJ_S2 = np.array([[1.20, 0.04, -0.12], [0.04, 1.47, 0.26], [-0.12, 0.26, 1.33]])
+QREST_S2 = np.array([0.51, 0.11, -0.11])
+KJ_F3 = np.diag([0.5, 1.5, 2.0])
+QREST_F3 = np.deg2rad([5.0, 0.0, 0.0])
+TAU0 = 0.08
+R = np.pi / 12
+TG = pj.center_out_targets()
+CHAIN = pj.Wrist(1.0)
+
+
+def lam0(KJ=KJ_S2, q_rest=QREST_S2, tau0=TAU0):
+    return pj.Lambda0PMP(CHAIN, KJ=KJ, q_rest=q_rest, W=tau0 * KJ)
+
+
+def slsqp_posture(KJ, q_rest, target):
+    res = scipy.optimize.minimize(
+        lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), q_rest, jac=lambda q: KJ @ (q - q_rest),
+        constraints=[{"type": "eq", "fun": lambda q: wrist_fk(q) - target, "jac": wrist_jac}],
+        method="SLSQP", options={"ftol": 1e-15, "maxiter": 500},
+    )
+    assert res.success
+    return res.x
+
+
+@pytest.fixture(scope="module")
+def long_runs():
+    """Three 2 s movements per model from the same start: E directly, and N then E."""
+    q0 = QREST_S2 + np.array([0.05, -0.1, 0.08])
+    seqs = np.stack([np.stack([TG["E"], TG["E"]]), np.stack([TG["N"], TG["E"]])])
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+    kw = dict(duration=2.0, dt=1e-3, saveat=pj.SaveAt(every=50))
+    out = {"q0": q0}
+    out["lam0"] = pj.simulate_sequence(lam0(), planner, q0, seqs, **kw)
+    out["pmp1"] = pj.simulate_sequence(pj.PMP1(CHAIN, W=TAU0 * KJ_S2), planner, q0, seqs, **kw)
+    out["pmp2"] = pj.simulate_sequence(pj.PMP2(CHAIN, KJ=KJ_S2, q_rest=QREST_S2, W=TAU0 * KJ_S2),
+                                       planner, q0, seqs, **kw)
+    return out
+
+
+def test_lambda0_reaches_target_in_the_energy_minimising_posture(long_runs):
+    tr = long_runs["lam0"]
+    assert np.all(np.asarray(tr.status) == 0)
+    q_star = slsqp_posture(KJ_S2, QREST_S2, TG["E"])
+    for seq in range(2):
+        np.testing.assert_allclose(tr.x[seq, -1, -1], TG["E"], atol=1e-6)
+        np.testing.assert_allclose(tr.q[seq, -1, -1], q_star, atol=1e-6)
+    # Donders' law: E directly and E via N end in the same posture.
+    assert np.max(np.abs(tr.q[0, -1, -1] - tr.q[1, -1, -1])) < 1e-6
+
+
+def test_pmp1_is_path_dependent_and_pmp2_misses(long_runs):
+    p1, p2 = long_runs["pmp1"], long_runs["pmp2"]
+    np.testing.assert_allclose(p1.x[:, -1, -1], np.stack([TG["E"], TG["E"]]), atol=1e-6)
+    assert np.max(np.abs(p1.q[0, -1, -1] - p1.q[1, -1, -1])) > 1e-3
+    assert np.linalg.norm(p2.x[0, -1, -1] - TG["E"]) > 1e-3
+    # PMP2 ends at the (path-independent) equilibrium of both springs, which is not the target.
+    assert np.max(np.abs(p2.q[0, -1, -1] - p2.q[1, -1, -1])) < 1e-6
+
+
+def test_task_dynamics_identity_along_trajectory(long_runs):
+    """Eq 5: B(q) ẋ = K(t) (x_d − x), i.e. ẋ = (J W⁻¹ Jᵀ) K(t) (x_d − x), at every saved step."""
+    tr = long_runs["lam0"]
+    gain = arimoto(22.5, 0.08)
+    A = np.linalg.inv(TAU0 * KJ_S2)
+    q, xdot, t = np.asarray(tr.q[1, 0]), np.asarray(tr.xdot[1, 0]), np.asarray(tr.t)
+    for i in range(len(t)):
+        J = wrist_jac(q[i])
+        expected = J @ A @ J.T @ (gain(t[i]) * (TG["N"] - wrist_fk(q[i])))
+        np.testing.assert_allclose(xdot[i], expected, rtol=1e-9, atol=1e-12)
+
+
+def test_matches_solve_ivp():
+    q0 = QREST_S2 + np.array([0.1, 0.05, -0.05])
+    target = TG["NE"]
+    tr = pj.simulate(lam0(), pj.ArimotoPlanner(k=22.5, tau=0.08), q0, target, duration=0.4,
+                     dt=1e-3, saveat=pj.SaveAt(every=10))
+    gain = arimoto(22.5, 0.08)
+    ref = scipy.integrate.solve_ivp(
+        lambda t, q: pmp_qdot(q, t, target, KJ_S2, QREST_S2, TAU0 * KJ_S2, gain),
+        (0, 0.4), q0, method="DOP853", rtol=1e-10, atol=1e-12, t_eval=np.asarray(tr.t), dense_output=False,
+    )
+    assert np.max(np.abs(ref.y.T - np.asarray(tr.q))) < 1e-6
+
+
+def test_bell_shaped_speed_profile():
+    tr = pj.simulate(lam0(KJ_F3, QREST_F3), pj.ArimotoPlanner(k=22.5, tau=0.08), QREST_F3, TG["NE"],
+                     duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=10))
+    v = np.asarray(tr.speed)
+    assert v[0] < 1e-12
+    peaks = [i for i in range(1, len(v) - 1) if v[i] > v[i - 1] and v[i] >= v[i + 1]]
+    assert len(peaks) == 1 and 2 < peaks[0] < len(v) - 5
+    assert np.all(np.diff(v[: peaks[0] + 1]) > 0) and np.all(np.diff(v[peaks[0]:]) < 0)
+
+
+def test_minimum_jerk_planner_gives_straight_minimum_jerk_path():
+    T = 0.4
+    tr = pj.simulate(lam0(), pj.MinimumJerkPlanner(duration=T), QREST_S2, TG["SW"], duration=T,
+                     dt=5e-4, saveat=pj.SaveAt(every=20))
+    s = np.asarray(tr.t) / T
+    xi = s**3 * (10 - 15 * s + 6 * s**2)
+    x0 = np.asarray(tr.x[0])
+    expected = x0 + xi[:, None] * (TG["SW"] - x0)
+    keep = s <= 0.9
+    np.testing.assert_allclose(np.asarray(tr.x)[keep], expected[keep], atol=1e-7)
+
+
+def test_batch_equals_single_runs(rng):
+    B = 5
+    q0 = QREST_S2 + rng.normal(scale=0.05, size=(B, 3))
+    ang = rng.uniform(0, 2 * np.pi, B)
+    targets = R * np.stack([np.cos(ang), np.sin(ang)], -1)
+    KJ = np.stack([KJ_S2 * s for s in rng.uniform(0.8, 1.2, B)])
+    model = pj.Lambda0PMP(CHAIN, KJ=KJ, q_rest=QREST_S2, W=TAU0 * KJ)
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+    kw = dict(duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=100))
+    batch = pj.simulate(model, planner, q0, targets, **kw)
+    assert batch.q.shape == (B, 5, 3)
+    for i in range(B):
+        one = pj.simulate(lam0(KJ[i]), planner, q0[i], targets[i], **kw)
+        np.testing.assert_allclose(batch.q[i], one.q, rtol=0, atol=1e-13)
+    vm = jax.vmap(lambda q, x: pj.simulate(lam0(), planner, q, x, **kw).q)(jnp.asarray(q0), jnp.asarray(targets))
+    np.testing.assert_allclose(vm[0], pj.simulate(lam0(), planner, q0[0], targets[0], **kw).q, atol=1e-13)
+
+
+def test_saveat_given_times_and_final():
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+    full = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=10))
+    ts = (0.0, 0.1, 0.25, 0.4)
+    at = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(ts=ts))
+    idx = [int(round(t / 0.01)) for t in ts]
+    np.testing.assert_allclose(at.q, np.asarray(full.q)[idx], atol=1e-9)
+    fin = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(final=True))
+    np.testing.assert_allclose(fin.q[-1], full.q[-1], atol=1e-13)
+
+
+def test_eq10_gain_against_numpy():
+    q0 = QREST_S2
+    planner = pj.ArimotoPlanner(k=None, tau=0.08, tau0=TAU0)
+    tr = pj.simulate(lam0(), planner, q0, TG["S"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=100))
+    J = wrist_jac(q0)
+    b_max = np.linalg.eigvalsh(np.linalg.inv(J @ np.linalg.inv(TAU0 * KJ_S2) @ J.T)).max()
+    gain = arimoto(b_max / TAU0, 0.08)
+    ref = scipy.integrate.solve_ivp(
+        lambda t, q: pmp_qdot(q, t, TG["S"], KJ_S2, QREST_S2, TAU0 * KJ_S2, gain),
+        (0, 0.4), q0, method="DOP853", rtol=1e-10, atol=1e-12, t_eval=np.asarray(tr.t))
+    assert np.max(np.abs(ref.y.T - np.asarray(tr.q))) < 1e-6
+
+
+def test_gradients_match_central_differences():
+    """d/dθ of a trajectory loss, θ = (KJ, q_rest, τ0, τ, k, target)."""
+    q0 = QREST_S2 + np.array([0.05, 0.0, 0.05])
+    kw = dict(duration=0.2, dt=2e-3, saveat=pj.SaveAt(every=20))
+
+    def loss(p):
+        KJ = p["KJ"] + p["KJ"].T  # symmetric parameterisation
+        model = pj.Lambda0PMP(CHAIN, KJ=KJ, q_rest=p["q_rest"], W=p["tau0"] * KJ)
+        tr = pj.simulate(model, pj.ArimotoPlanner(k=p["k"], tau=p["tau"]), q0, p["target"], **kw)
+        return jnp.sum(tr.x**2) + jnp.sum(jnp.sin(tr.q[-1]))
+
+    p0 = {"KJ": jnp.asarray(KJ_S2 / 2), "q_rest": jnp.asarray(QREST_S2), "tau0": jnp.asarray(0.08),
+          "tau": jnp.asarray(0.06), "k": jnp.asarray(20.0), "target": jnp.asarray(TG["NW"])}
+    f = jax.jit(loss)
+    g = jax.jit(jax.grad(loss))(p0)
+    flat, unravel = ravel_pytree(p0)
+    gflat = ravel_pytree(g)[0]
+    for i in range(flat.size):
+        h = 1e-6 * max(1.0, abs(float(flat[i])))
+        e = jnp.zeros_like(flat).at[i].set(h)
+        fd = (f(unravel(flat + e)) - f(unravel(flat - e))) / (2 * h)
+        assert abs(float(gflat[i]) - float(fd)) <= 1e-5 * max(abs(float(fd)), 1e-2), (i, gflat[i], fd)
+
+
+def test_singular_start_is_flagged():
+    q0 = np.array([0.0, np.pi / 2 - 1e-6, 0.0])
+    tr = pj.simulate(lam0(), pj.ConstantPlanner(k=1.0), q0, TG["C"], duration=0.05, dt=1e-3,
+                     saveat=pj.SaveAt(every=10))
+    assert int(tr.status) == 2 and float(tr.manipulability[0]) < 1e-4
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (dict(KJ=np.array([[1.0, 0.2, 0], [0, 1, 0], [0, 0, 1]])), "KJ"),
+        (dict(KJ=np.diag([1.0, -1.0, 1.0])), "KJ"),
+        (dict(W=np.diag([1.0, 1.0])), "W"),
+        (dict(W=np.diag([np.nan, 1.0, 1.0])), "W"),
+        (dict(q_rest=np.zeros(2)), "q_rest"),
+        (dict(q_rest=np.array([np.inf, 0, 0])), "q_rest"),
+    ],
+)
+def test_bad_model_input(change, match):
+    kw = dict(KJ=KJ_S2, q_rest=QREST_S2, W=TAU0 * KJ_S2) | change
+    with pytest.raises(ValueError, match=match):
+        pj.Lambda0PMP(CHAIN, **kw)
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(target=np.array([0.99, 0.0])), "target"),
+        (dict(target=np.array([0.1, 0.1, 0.1])), "target"),
+        (dict(target=np.array([np.nan, 0.1])), "target"),
+        (dict(q0=np.zeros(4)), "q0"),
+        (dict(duration=0.0), "duration"),
+        (dict(duration=-1.0), "duration"),
+        (dict(dt=0.0), "dt"),
+        (dict(dt=0.05), "dt"),
+    ],
+)
+def test_bad_simulation_input(kw, match):
+    args = dict(q0=QREST_S2, target=TG["E"], duration=0.4, dt=1e-3) | kw
+    with pytest.raises(ValueError, match=match):
+        pj.simulate(lam0(), pj.ArimotoPlanner(k=22.5, tau=0.08), args.pop("q0"), args.pop("target"), **args)
+
+
+def test_bad_planner_input():
+    with pytest.raises(ValueError, match="tau"):
+        pj.ArimotoPlanner(k=1.0, tau=-0.1)
+    with pytest.raises(ValueError, match="k"):
+        pj.ConstantPlanner(k=0.0)
+    with pytest.raises(ValueError, match="tau0"):
+        pj.ArimotoPlanner(k=None, tau=0.1)
+
+
+def test_center_out_protocol():
+    order, seq = pj.center_out_trials(3, seed=7)
+    order2, _ = pj.center_out_trials(3, seed=7)
+    np.testing.assert_array_equal(order, order2)
+    assert seq.shape == (3, 16, 2)
+    for row, s in zip(order, seq):
+        assert sorted(row) == sorted(pj.DIRECTIONS)
+        np.testing.assert_allclose(s[1::2], 0.0)
+        np.testing.assert_allclose(np.linalg.norm(s[0::2], axis=-1), R)
+    np.testing.assert_allclose(TG["E"], [R, 0], atol=1e-16)
+    np.testing.assert_allclose(TG["N"], [0, R], atol=1e-16)
