@@ -247,3 +247,33 @@ def test_center_out_protocol():
         np.testing.assert_allclose(np.linalg.norm(s[0::2], axis=-1), R)
     np.testing.assert_allclose(TG["E"], [R, 0], atol=1e-16)
     np.testing.assert_allclose(TG["N"], [0, R], atol=1e-16)
+
+
+def test_planar_arm_and_user_chain():
+    """Any chain: 3-link planar arm (analytic) and the same arm as a user FK function agree, and
+    the λ0-PMP ends in the SLSQP minimiser of the elastic energy on the target manifold."""
+    L = np.array([0.3, 0.25, 0.15])
+    KJ = np.array([[2.0, 0.3, 0.0], [0.3, 1.0, 0.1], [0.0, 0.1, 0.5]])
+    q_rest = np.array([0.3, 0.8, 0.4])
+    target = np.array([0.35, 0.3])
+
+    def fk(q):
+        phi = jnp.cumsum(q)
+        return jnp.stack([jnp.sum(L * jnp.cos(phi)), jnp.sum(L * jnp.sin(phi))])
+
+    kw = dict(duration=1.5, dt=1e-3, saveat=pj.SaveAt(final=True))
+    planner = pj.ArimotoPlanner(k=None, tau=0.05, tau0=0.05)
+    ends = []
+    for chain in (pj.PlanarArm(L), pj.FunctionChain(fk, n=3, m=2)):
+        model = pj.Lambda0PMP(chain, KJ=KJ, q_rest=q_rest, W=0.05 * KJ)
+        ends.append(np.asarray(pj.simulate(model, planner, q_rest, target, **kw).q[-1]))
+    np.testing.assert_allclose(ends[0], ends[1], atol=1e-12)
+    fk_np = lambda q: np.asarray(fk(jnp.asarray(q)))  # noqa: E731
+    res = scipy.optimize.minimize(
+        lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), q_rest, method="SLSQP",
+        constraints=[{"type": "eq", "fun": lambda q: fk_np(q) - target}], options={"ftol": 1e-15},
+    )
+    np.testing.assert_allclose(ends[0], res.x, atol=1e-6)
+    with pytest.raises(ValueError, match="target"):
+        pj.simulate(pj.Lambda0PMP(pj.PlanarArm(L), KJ=KJ, q_rest=q_rest, W=KJ), planner, q_rest,
+                    np.array([1.0, 0.0]), **kw)
