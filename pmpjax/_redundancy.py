@@ -20,6 +20,18 @@ def admittance_terms_soa(J, A):
     return P, mm(J, P)
 
 
+def admittance_terms_diag_soa(J, a):
+    """:func:`admittance_terms_soa` for a diagonal ``A = diag(a)``, ``a`` (n, ...): ``P = A Jᵀ``
+    (n, m, ...) and ``M = J A Jᵀ`` (m, m, ...) without multiplying by the zeros of ``A``."""
+    m, n = J.shape[:2]
+    P = jnp.stack([jnp.stack([a[i] * J[r, i] for r in range(m)]) for i in range(n)])
+    cols = {}
+    for r in range(m):
+        for c in range(r, m):
+            cols[r, c] = cols[c, r] = sum(J[r, i] * P[i, c] for i in range(n))
+    return P, jnp.stack([jnp.stack([cols[r, c] for c in range(m)]) for r in range(m)])
+
+
 def pinv_soa(J, A):
     """Weighted pseudo-inverse ``J#_W = A Jᵀ (J A Jᵀ)⁻¹`` (n, m, ...)."""
     P, M = admittance_terms_soa(J, A)
@@ -39,7 +51,7 @@ def _admittance(J, W, w):
         w = jnp.asarray(w)
         if w.shape[-1:] != (n,):
             raise ValueError(f"`w` must have trailing shape ({n},), got {w.shape}")
-        return to_soa(jnp.eye(n) / w[..., None, :], 2)
+        return to_soa(jnp.eye(n).reshape((1,) * (w.ndim - 1) + (n, n)) / w[..., None, :], 2)
     W = jnp.asarray(W)
     if W.shape[-2:] != (n, n):
         raise ValueError(f"`W` must have trailing shape ({n}, {n}), got {W.shape}")

@@ -1,0 +1,211 @@
+"""Benchmark: batched NIO (Donders) fits in JAX vs a per-subject SciPy loop.
+
+Synthetic subjects (KJ random SPD with trace 4 around the Table 1 values, q_rest around Table 2),
+500 postures each, 0.5° orientation noise. JAX: ``fitting.fit_donders`` (LM + implicit
+equilibria, all subjects of a chunk and their starts in one jit+vmap call; compile timed
+separately with ``.lower().compile()``). Baseline, run in the same process: for each subject
+``scipy.optimize.least_squares`` (method "lm", 2-point finite-difference Jacobian) whose
+residual solves each equilibrium with ``scipy.optimize.minimize(method="SLSQP")`` (warm-started
+at the observed posture), same parameterisation and torsion residual, one start.
+
+Usage: ``python benchmarks/donders_fit.py [--sizes 1 10 100 1000] [--scipy-budget 240]``.
+
+Latest figures (2026-11-22, 2-core CPU, no GPU, machine shared with other jobs):
+(see the table printed by the run, copied below by hand)
+
+FIGURES_PLACEHOLDER
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+import scipy.linalg  # noqa: E402
+from scipy.optimize import least_squares as sp_least_squares  # noqa: E402
+from scipy.optimize import minimize  # noqa: E402
+
+import fitting  # noqa: E402
+import pmpjax as pj  # noqa: E402
+from fitting._donders import _fit_batch, _starts  # noqa: E402
+
+N_POST = 500
+N_STARTS = 2
+CHUNK = 100
+
+
+def make_subjects(S, seed=0):
+    rng = np.random.default_rng(seed)
+    _, K, q = pj.paper_subjects()
+    base = fitting.params_from_stiffness(K)
+    idx = rng.integers(0, 6, S)
+    s = base[idx] + rng.normal(scale=0.05, size=(S, 5))
+    KJ = np.stack([np.asarray(fitting.stiffness_from_params(jax.numpy.asarray(v), 3)) for v in s])
+    q_rest = q[idx] + rng.normal(scale=0.03, size=(S, 3))
+    return KJ, q_rest
+
+
+# --- SciPy baseline --------------------------------------------------------------------------
+
+
+def _kj_np(s):
+    S = np.array([[s[0], s[2], s[3]], [s[2], s[1], s[4]], [s[3], s[4], -s[0] - s[1]]])
+    E = scipy.linalg.expm(S)
+    return 4.0 * E / np.trace(E)
+
+
+def _fk(q):
+    a, b, c = q
+    sa, ca, sb, sc, cc = np.sin(a), np.cos(a), np.sin(b), np.sin(c), np.cos(c)
+    return np.array([-(ca * sb * cc - sa * sc), -(sa * sb * cc + ca * sc)])
+
+
+def _jac(q):
+    a, b, c = q
+    sa, ca, sb, cb, sc, cc = np.sin(a), np.cos(a), np.sin(b), np.cos(b), np.sin(c), np.cos(c)
+    x1, x2 = _fk(q)
+    return np.array(
+        [[-x2, -ca * cb * cc, ca * sb * sc + sa * cc], [x1, -sa * cb * cc, sa * sb * sc - ca * cc]]
+    )
+
+
+def _rot(q):
+    a, b, c = q
+    Rx = np.array([[1, 0, 0], [0, np.cos(-a), -np.sin(-a)], [0, np.sin(-a), np.cos(-a)]])
+    Rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    Ry = np.array([[np.cos(c), 0, np.sin(c)], [0, 1, 0], [-np.sin(c), 0, np.cos(c)]])
+    return Rx @ Rz @ Ry
+
+
+def scipy_fit(pointing, postures, theta0):
+    R_obs = [_rot(q) for q in postures]
+
+    def residual(theta):
+        K, qr = _kj_np(theta[:5]), theta[5:]
+        out = np.empty(len(pointing))
+        for i, (x, q0) in enumerate(zip(pointing, postures)):
+            cons = {"type": "eq", "fun": lambda q, x=x: _fk(q) - x, "jac": _jac}
+            r = minimize(
+                lambda q: 0.5 * (q - qr) @ K @ (q - qr),
+                q0,
+                jac=lambda q: K @ (q - qr),
+                constraints=[cons],
+                method="SLSQP",
+                options={"ftol": 1e-12, "maxiter": 100},
+            )
+            M = R_obs[i].T @ _rot(r.x)
+            out[i] = np.arctan2(M[2, 1] - M[1, 2], M[1, 1] + M[2, 2])
+        return out
+
+    return sp_least_squares(residual, theta0, method="lm", xtol=1e-10, ftol=1e-10)
+
+
+# --- JAX -------------------------------------------------------------------------------------
+
+
+def jax_fit(rec, S, chunk):
+    """Returns (compile_s, run_s, fit)."""
+    x, q = rec.pointing[:S], rec.joint_angles[:S]
+    w = np.ones(x.shape[:2])
+    q_mean = q.mean(1)
+    th0 = _starts(q_mean, 5, 3, N_STARTS, 0)
+    c = min(chunk, S)
+    opts = dict(n_k=5, trace=4.0, kind="torsion", tol=1e-10, max_steps=100, rcond=1e-2)
+    t = time.perf_counter()
+    _fit_batch.lower(pj.Wrist(), th0[:c], x[:c], q[:c], w[:c], **opts).compile()
+    t_compile = time.perf_counter() - t
+    t = time.perf_counter()
+    fit = fitting.fit_donders(pj.Wrist(), x, q, n_starts=N_STARTS, chunk_size=c)
+    return t_compile, time.perf_counter() - t, fit
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 100, 1000])
+    ap.add_argument("--scipy-subjects", type=int, default=10)
+    ap.add_argument(
+        "--scipy-budget", type=float, default=240.0, help="seconds; stop the SciPy loop after this"
+    )
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results", "donders_fit.json"))
+    args = ap.parse_args()
+    S_max = max(args.sizes)
+    KJ, q_rest = make_subjects(max(S_max, args.scipy_subjects))
+    t = time.perf_counter()
+    rec = pj.synthetic_recordings(KJ, q_rest, N_POST, noise_deg=0.5, seed=1)
+    print(f"synthetic data: {KJ.shape[0]} subjects x {N_POST} postures in {time.perf_counter() - t:.1f} s")
+    results = {
+        "date": "2026-11-22",
+        "machine": "2-core CPU, no GPU (shared)",
+        "postures": N_POST,
+        "n_starts_jax": N_STARTS,
+        "chunk": CHUNK,
+        "jax": [],
+        "scipy": None,
+    }
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+
+    def dump():
+        with open(args.out, "w") as f:
+            json.dump(results, f, indent=2)
+
+    # SciPy loop on the first subjects (time-boxed)
+    times, conv = [], []
+    _, Kp, qp = pj.paper_subjects()
+    for s in range(args.scipy_subjects):
+        th0 = np.concatenate([np.zeros(5), rec.joint_angles[s].mean(0)])
+        t = time.perf_counter()
+        r = scipy_fit(rec.pointing[s], rec.joint_angles[s], th0)
+        times.append(time.perf_counter() - t)
+        conv.append(bool(r.success))
+        print(f"scipy subject {s}: {times[-1]:.1f} s, nfev {r.nfev}, success {r.success}", flush=True)
+        results["scipy"] = {
+            "subjects": len(times),
+            "seconds_per_subject": float(np.mean(times)),
+            "subjects_per_s": float(1 / np.mean(times)),
+            "converged": conv,
+        }
+        dump()
+        if sum(times) > args.scipy_budget:
+            print(f"scipy loop stopped after {len(times)} subjects (budget {args.scipy_budget:.0f} s)")
+            break
+    sp_rate = results["scipy"]["subjects_per_s"]
+
+    print(
+        f"\n{'subjects':>8} {'compile [s]':>11} {'run [s]':>9} {'ms/subject':>11} {'subjects/s':>11} "
+        f"{'x SciPy':>8} {'converged':>9}"
+    )
+    for S in args.sizes:
+        tc, tr, fit = jax_fit(rec, S, CHUNK)
+        rate = S / tr
+        row = {
+            "subjects": S,
+            "compile_s": tc,
+            "run_s": tr,
+            "ms_per_subject": 1e3 * tr / S,
+            "subjects_per_s": rate,
+            "speedup_vs_scipy": rate / sp_rate,
+            "converged_fraction": float(np.mean(fit.converged)),
+        }
+        results["jax"].append(row)
+        dump()
+        print(
+            f"{S:8d} {tc:11.1f} {tr:9.2f} {1e3 * tr / S:11.1f} {rate:11.2f} {rate / sp_rate:8.0f} "
+            f"{np.mean(fit.converged):9.3f}",
+            flush=True,
+        )
+    print(
+        f"\nSciPy loop: {results['scipy']['seconds_per_subject']:.1f} s/subject over "
+        f"{results['scipy']['subjects']} subjects ({sp_rate:.4f} subjects/s)"
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

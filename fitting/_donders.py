@@ -1,0 +1,385 @@
+"""NIO fit of Donders' law: per-subject stiffness ``KJ`` (SPD, trace 4) and rest posture ``q_rest``.
+
+For each subject the model posture at each observed pointing position is the equilibrium of
+design §3.1 (``pmpjax.equilibrium_posture``, differentiated implicitly), and the parameters
+minimise the squared mismatch with the observed postures, by ``fitting.least_squares``
+(Levenberg–Marquardt).
+
+**Parameterisation.** ``KJ = t · expm(S) / tr(expm(S))`` with ``S`` symmetric and traceless
+(``n(n+1)/2 − 1`` numbers: 5 for the wrist) and ``t`` the trace (4 Nm/rad). This map is a smooth
+bijection from traceless symmetric matrices onto SPD matrices of trace ``t`` (matrix log, then
+normalise), so every parameter vector is valid, no constraint or penalty is needed, the
+parameter count equals the true number of degrees of freedom (no built-in flat direction, unlike
+a normalised Cholesky factor), and there is no eigenvector-ordering ambiguity or singularity at
+equal eigenvalues (unlike eigenvalue + rotation parameterisations). ``S = 0`` is isotropic.
+
+**Residual.** ``residual="torsion"`` (default, wrist only): the signed angle of ``R_obsᵀ R_model``
+about the pointing axis [rad], one number per sample. Model and observation point at the same
+screen point, so they differ only by a rotation about the pointing axis — the Donders torsion,
+which is what the paper's NIO fits; it is free of the joint-angle parameterisation and, for
+isotropic orientation noise, has equal variance for every sample, so it is unweighted.
+``residual="joint"``: the joint-angle difference ``q_model − q_obs`` (n per sample), for any chain.
+
+Standard errors come from the Gauss–Newton covariance (``fitting.covariance``); the
+identifiability report gives the singular values of the residual Jacobian and the parameter
+combinations (right singular vectors) whose singular value is below ``rcond · s_max``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from pmpjax._equilibria import equilibrium_one
+from pmpjax._kinematics import Chain, Wrist
+from pmpjax._orientation import torsion_between, wrist_rotation
+from pmpjax._validate import as_array
+
+from ._optimise import covariance, least_squares
+
+_WRIST_JOINTS = ("PS", "FE", "RUD")
+
+
+# --- parameterisation ---------------------------------------------------------------------
+
+
+def _sym_index(n):
+    """Index pairs of the free entries of a traceless symmetric n×n matrix: diagonal 0..n−2, then
+    the upper triangle row by row."""
+    return [(i, i) for i in range(n - 1)] + [(i, j) for i in range(n) for j in range(i + 1, n)]
+
+
+def stiffness_from_params(s, n: int, trace: float = 4.0):
+    """``KJ`` (n, n) SPD with ``tr KJ = trace`` from ``s`` (n(n+1)/2 − 1,): ``t expm(S)/tr expm(S)``."""
+    idx = _sym_index(n)
+    S = jnp.zeros((n, n), s.dtype)
+    for k, (i, j) in enumerate(idx):
+        S = S.at[i, j].set(s[k]).at[j, i].set(s[k])
+    S = S.at[n - 1, n - 1].set(-sum(s[k] for k in range(n - 1)))
+    E = _expm_sym(S)
+    return trace * E / jnp.trace(E)
+
+
+def _expm_sym(S, squarings: int = 6, order: int = 10):
+    """``expm(S)`` by scaling and squaring a degree-10 Taylor polynomial (Horner). For
+    ``|S|₂ ≤ 8`` (eigenvalue ratios up to e¹⁶) the truncation error is < 1e-15 relative; a small
+    graph (compile time) and exact derivatives. ``S`` is symmetric so ``E`` is too."""
+    A = S / 2.0**squarings
+    eye = jnp.eye(S.shape[0], dtype=S.dtype)
+    E = eye
+    for k in range(order, 0, -1):
+        E = eye + (A @ E) / k
+    for _ in range(squarings):
+        E = E @ E
+    return 0.5 * (E + E.T)
+
+
+def params_from_stiffness(KJ):
+    """Inverse of :func:`stiffness_from_params` (trace is dropped): ``S = log KJ − tr(log KJ)/n I``."""
+    KJ = np.asarray(KJ, dtype=float)
+    n = KJ.shape[-1]
+    w, V = np.linalg.eigh(KJ)
+    L = (V * np.log(w)[..., None, :]) @ np.swapaxes(V, -1, -2)
+    L = L - np.trace(L, axis1=-2, axis2=-1)[..., None, None] / n * np.eye(n)
+    return np.stack([L[..., i, j] for i, j in _sym_index(n)], -1)
+
+
+def parameter_names(chain: Chain) -> tuple[str, ...]:
+    n = chain.n
+    lab = _WRIST_JOINTS if isinstance(chain, Wrist) else tuple(str(i) for i in range(n))
+    return tuple(f"logK[{lab[i]},{lab[j]}]" for i, j in _sym_index(n)) + tuple(f"q_rest[{v}]" for v in lab)
+
+
+# --- result -------------------------------------------------------------------------------
+
+
+STATUS = {
+    0: "converged",
+    1: "max_steps reached",
+    2: "non-finite or equilibrium failure",
+    3: "too few samples",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class DondersFit:
+    """Per-subject NIO results (leading axis S = subjects; p parameters; numpy arrays).
+
+    ``KJ`` (S, n, n) [Nm/rad], ``q_rest`` (S, n) [rad]; ``params`` (S, p) (see
+    :func:`parameter_names`); ``loss`` (S,) ½ Σ r²; ``rms`` (S,) RMS residual [rad];
+    ``steps`` (S,) LM iterations of the best start; ``converged`` (S,) bool; ``status`` (S,) int
+    (see ``STATUS``); ``n_samples`` (S,); ``stderr`` (S, p), ``cov`` (S, p, p); ``KJ_stderr``
+    (S, n, n), ``q_rest_stderr`` (S, n) (delta method); ``singular_values`` (S, p) of the
+    residual Jacobian; ``directions`` (S, p, p), row k = parameter combination of singular value
+    k; ``identifiable`` (S, p) bool per direction (``s_k > rcond s_max``); ``direction_stderr``
+    (S, p) standard error along each direction; ``start_loss`` (S, n_starts).
+    """
+
+    KJ: np.ndarray
+    q_rest: np.ndarray
+    params: np.ndarray
+    loss: np.ndarray
+    rms: np.ndarray
+    steps: np.ndarray
+    converged: np.ndarray
+    status: np.ndarray
+    n_samples: np.ndarray
+    stderr: np.ndarray
+    cov: np.ndarray
+    KJ_stderr: np.ndarray
+    q_rest_stderr: np.ndarray
+    singular_values: np.ndarray
+    directions: np.ndarray
+    identifiable: np.ndarray
+    direction_stderr: np.ndarray
+    start_loss: np.ndarray
+    param_names: tuple[str, ...]
+
+    def report(self, i: int = 0) -> str:
+        """Human-readable identifiability report of subject ``i``."""
+        lines = [
+            f"subject {i}: {STATUS[int(self.status[i])]}, {int(self.steps[i])} LM steps, "
+            f"RMS residual {np.rad2deg(self.rms[i]):.3g} deg, n = {int(self.n_samples[i])}"
+        ]
+        lines.append("singular values of the residual Jacobian and their parameter combinations:")
+        for k, s in enumerate(self.singular_values[i]):
+            v = self.directions[i, k]
+            top = np.argsort(-np.abs(v))[:3]
+            combo = " ".join(f"{v[j]:+.2f}·{self.param_names[j]}" for j in top)
+            tag = "" if self.identifiable[i, k] else "  <- UNIDENTIFIABLE"
+            lines.append(f"  s={s:.3g}  se={self.direction_stderr[i, k]:.3g}  {combo}{tag}")
+        return "\n".join(lines)
+
+
+# --- the fit ------------------------------------------------------------------------------
+
+
+def _residual_fn(chain, n_k, trace, kind, tol):
+    n = chain.n
+
+    def residual(theta, data):
+        x, q_obs, w = data
+        KJ = stiffness_from_params(theta[:n_k], n, trace)
+        qr = theta[n_k:]
+        q, _, ok, _ = jax.vmap(
+            lambda xx, q0: equilibrium_one(chain, KJ, qr, xx, q0, tol=tol, check_minimum=False)
+        )(x, q_obs)
+        if kind == "torsion":
+            r = torsion_between(wrist_rotation(q_obs), wrist_rotation(q))
+            bad = ~ok
+        else:
+            r = q - q_obs
+            bad = ~ok[:, None]
+            w = w[:, None]
+        # A failed equilibrium makes the residual non-finite: LM rejects the step (and a start
+        # whose own residual fails is reported as not converged).
+        return jnp.where(bad & (w > 0), jnp.nan, r * w).reshape(-1)
+
+    return residual
+
+
+@partial(jax.jit, static_argnames=("n_k", "trace", "kind", "tol", "max_steps"))
+def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, rcond):
+    residual = _residual_fn(chain, n_k, trace, kind, tol)
+    n = chain.n
+    p = theta0.shape[-1]
+
+    def one_subject(th0, x, q_obs, w):
+        res = jax.vmap(lambda t: least_squares(residual, t, (x, q_obs, w), max_steps=max_steps))(th0)
+        finite = jnp.isfinite(res.cost)
+        best = jnp.argmin(jnp.where(finite, res.cost, jnp.inf))
+        r = jax.tree_util.tree_map(lambda a: a[best], res)
+        n_valid = jnp.sum(w > 0) * (1 if kind == "torsion" else n)
+        N = r.residual.shape[0]
+        cov, se, s, Vt = covariance(r, rcond=1e-12)
+        # `covariance` divides by N − p; masked samples are not data: rescale to n_valid − p.
+        fix = (N - p) / jnp.maximum(n_valid - p, 1)
+        cov, se = cov * fix, se * jnp.sqrt(fix)
+        sigma = jnp.sqrt(2.0 * r.cost / jnp.maximum(n_valid - p, 1))
+        dse = sigma / jnp.where(s > 0, s, jnp.inf)
+        ident = s > rcond * s[0]
+        dK = jax.jacfwd(lambda t: stiffness_from_params(t, n, trace))(r.x[:n_k])  # (n, n, n_k)
+        covK = jnp.einsum("ija,ab,ijb->ij", dK, cov[:n_k, :n_k], dK)
+        enough = n_valid > p
+        status = jnp.where(~enough, 3, jnp.where(~finite[best], 2, jnp.where(r.converged, 0, 1)))
+        return dict(
+            x=r.x,
+            KJ=stiffness_from_params(r.x[:n_k], n, trace),
+            cost=r.cost,
+            rms=jnp.sqrt(2.0 * r.cost / jnp.maximum(n_valid, 1)),
+            steps=r.steps,
+            converged=r.converged & enough & finite[best],
+            status=status,
+            n=n_valid,
+            se=se,
+            cov=cov,
+            KJ_se=jnp.sqrt(jnp.maximum(covK, 0.0)),
+            s=s,
+            Vt=Vt,
+            ident=ident,
+            dse=dse,
+            start_cost=jnp.where(finite, res.cost, jnp.inf),
+        )
+
+    return jax.vmap(one_subject)(theta0, x, q_obs, w)
+
+
+def _starts(q_mean, n_k, n, n_starts, seed):
+    """Start 0: isotropic KJ, q_rest = mean observed posture; others: random log-stiffness
+    (component sd 0.3, i.e. eigenvalue ratios up to ~2) and q_rest offsets (sd 0.1 rad)."""
+    rng = np.random.default_rng(seed)
+    dk = rng.normal(scale=0.3, size=(n_starts, n_k))
+    dq = rng.normal(scale=0.1, size=(n_starts, n))
+    dk[0], dq[0] = 0.0, 0.0
+    return np.concatenate(
+        [np.broadcast_to(dk, q_mean.shape[:1] + dk.shape), q_mean[:, None, :] + dq[None]], -1
+    )
+
+
+def fit_donders(
+    chain: Chain,
+    pointing,
+    postures,
+    *,
+    mask=None,
+    n_starts: int = 4,
+    seed: int = 0,
+    residual: str | None = None,
+    trace: float = 4.0,
+    max_steps: int = 100,
+    rcond: float = 1e-2,
+    chunk_size: int | None = None,
+    tol: float = 1e-10,
+    callback=None,
+) -> DondersFit:
+    """Fit ``KJ`` (SPD, trace ``trace``) and ``q_rest`` per subject to steady postures (NIO).
+
+    **Arguments:**
+    - ``chain``: the chain (``pmpjax.Wrist()`` for Donders' law of the wrist).
+    - ``pointing``: (S, N, m) or (N, m) observed task positions (screen points [m]).
+    - ``postures``: (S, N, n) or (N, n) observed joint angles [rad] (from quaternions with
+      ``pmpjax.joint_angles_from_quat``).
+    - ``mask``: optional (S, N) bool of valid samples (ragged subjects; padded entries ignored).
+    - ``n_starts``: LM starts per subject (start 0 isotropic at the mean posture; the rest
+      seeded random perturbations); the lowest finite loss wins.
+    - ``residual``: "torsion" (wrist default) or "joint" (any chain) — see module docstring.
+    - ``max_steps``: LM iterations per start; ``rcond``: identifiability threshold on singular
+      values relative to the largest; ``tol``: equilibrium Newton tolerance.
+    - ``chunk_size``: subjects per compiled call (default: all at once); chunks reuse one
+      compilation, and ``callback(start, partial_fit)`` is called after each chunk (write results
+      as they go).
+
+    All subjects of a chunk, and all their starts, run in one ``jit``+``vmap`` call. A subject
+    whose fit fails is reported with ``converged = False`` and a ``status`` code; the others are
+    unaffected. Returns a :class:`DondersFit`.
+
+    **Raises:** ``TypeError``/``ValueError`` naming the argument for a non-chain, wrong shapes,
+    NaN/inf among the valid samples, unreachable pointing, bad options.
+    """
+    if not isinstance(chain, Chain):
+        raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
+    n, m = chain.n, chain.m
+    kind = residual or ("torsion" if isinstance(chain, Wrist) else "joint")
+    if kind not in ("torsion", "joint"):
+        raise ValueError(f"`residual` must be 'torsion' or 'joint', got {residual!r}")
+    if kind == "torsion" and not isinstance(chain, Wrist):
+        raise ValueError("`residual='torsion'` needs a pmpjax.Wrist chain; use residual='joint'")
+    pointing = np.asarray(as_array("pointing", pointing, tail=(None, m), finite=False), dtype=float)
+    postures = np.asarray(as_array("postures", postures, tail=(None, n), finite=False), dtype=float)
+    if pointing.ndim == 2:
+        pointing, postures = pointing[None], postures[None]
+        mask = None if mask is None else np.asarray(mask)[None]
+    if pointing.ndim != 3 or postures.shape[:2] != pointing.shape[:2]:
+        raise ValueError(
+            f"`pointing` (S, N, {m}) and `postures` (S, N, {n}) must agree in (S, N); got "
+            f"{pointing.shape} and {postures.shape}"
+        )
+    S, N = pointing.shape[:2]
+    if S == 0 or N == 0:
+        raise ValueError(f"need at least one subject and one sample, got (S, N) = ({S}, {N})")
+    mask = np.ones((S, N), bool) if mask is None else np.asarray(mask)
+    if mask.shape != (S, N) or mask.dtype != bool:
+        raise ValueError(f"`mask` must be a bool array of shape {(S, N)}, got {mask.dtype} {mask.shape}")
+    for name, a in (("pointing", pointing), ("postures", postures)):
+        bad = mask & ~np.all(np.isfinite(a), axis=-1)
+        if bad.any():
+            s, i = np.argwhere(bad)[0]
+            raise ValueError(
+                f"`{name}` contains NaN or inf at {int(bad.sum())} valid sample(s); first: "
+                f"subject {s}, sample {i} (mask them out or drop them)"
+            )
+    chain.check_target("pointing", pointing[mask])
+    if int(n_starts) != n_starts or n_starts < 1:
+        raise ValueError(f"`n_starts` must be a positive integer, got {n_starts}")
+    if int(max_steps) != max_steps or max_steps < 1:
+        raise ValueError(f"`max_steps` must be a positive integer, got {max_steps}")
+    if not (np.isfinite(trace) and trace > 0):
+        raise ValueError(f"`trace` must be positive, got {trace}")
+    chunk = S if chunk_size is None else int(chunk_size)
+    if chunk < 1:
+        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size}")
+
+    n_k = n * (n + 1) // 2 - 1
+    w = mask.astype(float)
+    x = np.where(mask[..., None], pointing, 0.0)
+    q_obs = np.where(mask[..., None], postures, 0.0)
+    q_mean = (q_obs * w[..., None]).sum(1) / np.maximum(w.sum(1), 1)[:, None]
+    theta0 = _starts(q_mean, n_k, n, int(n_starts), seed)
+    opts = dict(
+        n_k=n_k, trace=float(trace), kind=kind, tol=float(tol), max_steps=int(max_steps), rcond=float(rcond)
+    )
+    outs = []
+    for start in range(0, S, chunk):
+        sl = slice(start, min(start + chunk, S))
+        pad = chunk - (sl.stop - sl.start)
+        args = [
+            np.concatenate([a[sl], np.repeat(a[sl][-1:], pad, 0)]) if pad else a[sl]
+            for a in (theta0, x, q_obs, w)
+        ]
+        out = jax.device_get(_fit_batch(chain, *args, **opts))
+        out = {k: v[: sl.stop - sl.start] for k, v in out.items()}
+        outs.append(out)
+        if callback is not None:
+            callback(start, _to_fit(outs, n_k, chain))
+    return _to_fit(outs, n_k, chain)
+
+
+def _to_fit(outs, n_k, chain) -> DondersFit:
+    o = {k: np.concatenate([d[k] for d in outs]) for k in outs[0]}
+    return DondersFit(
+        KJ=o["KJ"],
+        q_rest=o["x"][:, n_k:],
+        params=o["x"],
+        loss=o["cost"],
+        rms=o["rms"],
+        steps=o["steps"],
+        converged=o["converged"],
+        status=o["status"],
+        n_samples=o["n"],
+        stderr=o["se"],
+        cov=o["cov"],
+        KJ_stderr=o["KJ_se"],
+        q_rest_stderr=o["se"][:, n_k:],
+        singular_values=o["s"],
+        directions=o["Vt"],
+        identifiable=o["ident"],
+        direction_stderr=o["dse"],
+        start_loss=o["start_cost"],
+        param_names=parameter_names(chain),
+    )
+
+
+def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
+    """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
+    ``pointing`` (..., P, 2)."""
+    from pmpjax._equilibria import equilibrium_posture
+    from pmpjax._orientation import rotvec_from_joint_angles
+
+    q = equilibrium_posture(
+        chain, np.asarray(KJ)[..., None, :, :], np.asarray(q_rest)[..., None, :], pointing
+    )
+    return rotvec_from_joint_angles(q)[..., 0]

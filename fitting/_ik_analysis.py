@@ -1,0 +1,178 @@
+"""Analysis around IK weights: task/null-space decomposition (Eqs 7–12), contribution
+coefficients (Eq 26), the over-specified-joint convention (Experiment 1), bootstrap confidence
+intervals over trials, and Hotelling's T² between two conditions.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import pmpjax as pj
+from pmpjax._pytree import pytree_dataclass
+from pmpjax._validate import as_array
+
+from ._ik_weights import estimate_ik_weights
+
+
+def ik_decomposition(qdot, xdot, J, w):
+    """``q̇ = q̇_task + q̇_null`` with ``q̇_task = J#_W ẋ`` and ``q̇_null = q̇ − q̇_task`` (Eqs 7–12).
+
+    ``qdot`` (..., K, n), ``xdot`` (..., K, m), ``J`` (..., K, m, n), ``w`` (..., n) weights (one set
+    per item, shared by its K samples). Returns ``(qdot_task, qdot_null)``, each (..., K, n).
+    """
+    qdot = as_array("qdot", qdot, tail=(None, None))
+    n = qdot.shape[-1]
+    xdot = as_array("xdot", xdot, tail=(None, None))
+    J = as_array("J", J, tail=(None, xdot.shape[-1], n))
+    w = as_array("w", w, tail=(n,))
+    wk = jnp.broadcast_to(jnp.asarray(w)[..., None, :], tuple(J.shape[:-2]) + (n,))
+    task = jnp.einsum("...ij,...j->...i", pj.weighted_pinv(J, w=wk), jnp.asarray(xdot))
+    return task, jnp.asarray(qdot) - task
+
+
+def contribution_coefficients(w):
+    """Contribution coefficients ``β_i = w_i⁻¹ / Σ_k w_k⁻¹`` (..., n) (Eq 26); they sum to one."""
+    inv = 1.0 / jnp.asarray(w)
+    return inv / jnp.sum(inv, axis=-1, keepdims=True)
+
+
+def overspecified_joints(J, *, mask=None, rtol: float = 1e-6, fraction: float = 0.99):
+    """Joints whose Jacobian column lies outside the span of the others (Experiment 1).
+
+    Joint j is over-specified when ``J`` without column j has rank < m at (at least ``fraction``
+    of the valid) samples: every solution of ``J q̇ = ẋ`` then has the same ``q̇_j``, so its IK
+    weight is unidentifiable; the paper sets it to 1 and normalises the others
+    (``estimate_ik_weights(..., fixed=...)``). ``J`` (..., K, m, n); returns bool (n,).
+    """
+    J = np.asarray(as_array("J", J, tail=(None, None)), dtype=float)
+    m, n = J.shape[-2:]
+    Jf = J.reshape(-1, m, n)
+    valid = np.ones(Jf.shape[0], bool) if mask is None else np.asarray(mask, bool).reshape(-1)
+    Jf = Jf[valid]
+    out = np.zeros(n, bool)
+    scale = np.linalg.norm(Jf, axis=(-2, -1)) + 1e-300
+    for j in range(n):
+        s = np.linalg.svd(np.delete(Jf, j, axis=-1), compute_uv=False)
+        low = s[:, m - 1] <= rtol * scale if s.shape[-1] >= m else np.ones(len(Jf), bool)
+        out[j] = low.mean() >= fraction
+    return out
+
+
+@pytree_dataclass
+class BootstrapResult:
+    """``w`` (..., n) estimate on all trials; ``lo``/``hi`` (..., n) percentile interval;
+    ``samples`` (B, ..., n) bootstrap replicates; ``converged`` (B, ...) per replicate."""
+
+    w: jax.Array
+    lo: jax.Array
+    hi: jax.Array
+    samples: jax.Array
+    converged: jax.Array
+
+
+def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=None,
+                         level: float = 0.95, **options) -> BootstrapResult:
+    """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
+
+    ``qdot`` (..., T, S, n), ``xdot`` (..., T, S, m), ``J`` (..., T, S, m, n), ``mask`` (..., T, S)
+    (a trial with no valid sample is never drawn). All ``n_boot`` replicates of every item run in
+    one vectorised :func:`estimate_ik_weights` call; ``options`` are passed on to it.
+    """
+    qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
+    xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
+    J = as_array("J", J, tail=(None, None, None, None), finite=False)
+    if not 0 < level < 1:
+        raise ValueError(f"`level` must lie in (0, 1), got {level}")
+    if int(n_boot) != n_boot or n_boot < 2:
+        raise ValueError(f"`n_boot` must be an integer >= 2, got {n_boot}")
+    key = jax.random.PRNGKey(0) if key is None else key
+    *batch, T, S, n = qdot.shape
+    batch = tuple(batch)
+    mask = np.ones(tuple(batch) + (T, S), bool) if mask is None else np.asarray(mask, bool)
+    if mask.shape != batch + (T, S):
+        raise ValueError(f"`mask` must have shape {batch + (T, S)}, got {mask.shape}")
+    flat = lambda a: jnp.asarray(a).reshape(batch + (T * S,) + a.shape[len(batch) + 2:])  # noqa: E731
+    full = estimate_ik_weights(flat(qdot), flat(xdot), flat(J),
+                               mask=mask.reshape(batch + (T * S,)), **options)
+    trial_ok = mask.any(-1)  # (..., T)
+    logits = jnp.where(jnp.asarray(trial_ok), 0.0, -jnp.inf)[..., None, :]  # (..., 1, T)
+    logits = jnp.broadcast_to(logits, batch + (T, T))
+    idx = jax.random.categorical(key, logits, axis=-1, shape=(n_boot,) + batch + (T,))
+    # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest
+    n_ok = trial_ok.sum(-1)[..., None]  # (..., 1)
+    Tb = int(n_ok.max())
+    idx = idx[..., :Tb]
+
+    def take(a):
+        a = jnp.asarray(a)
+        rest = a.shape[len(batch) + 2:]
+        ab = jnp.broadcast_to(a, (n_boot,) + a.shape)
+        ix = idx.reshape(idx.shape + (1,) * (1 + len(rest)))
+        g = jnp.take_along_axis(ab, ix, axis=len(batch) + 1)
+        return g.reshape((n_boot,) + batch + (Tb * S,) + rest)
+
+    used = np.arange(Tb) < n_ok  # (..., Tb)
+    mk = np.asarray(take(mask)).reshape((n_boot,) + batch + (Tb, S)) & used[..., None]
+    opts = {k: v for k, v in options.items() if k != "on_invalid"}
+    res = estimate_ik_weights(take(qdot), take(xdot), take(J), mask=mk.reshape((n_boot,) + batch + (Tb * S,)),
+                              on_invalid="flag", **opts)
+    a = (1.0 - level) / 2.0
+    lo = jnp.nanquantile(res.w, a, axis=0)
+    hi = jnp.nanquantile(res.w, 1.0 - a, axis=0)
+    return BootstrapResult(w=full.w, lo=lo, hi=hi, samples=res.w, converged=res.converged)
+
+
+@pytree_dataclass
+class HotellingResult:
+    """``t2`` Hotelling's T², ``f`` its F statistic with ``df1``, ``df2`` degrees of freedom, ``p``."""
+
+    t2: jax.Array
+    f: jax.Array
+    df1: jax.Array
+    df2: jax.Array
+    p: jax.Array
+
+
+def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
+    """Hotelling's T² test that two conditions have equal mean vectors.
+
+    ``a`` (N, p), ``b`` (N, p) for ``paired`` (the same N subjects in both conditions, as in
+    Experiment 1: ``T² = N d̄ᵀ S_d⁻¹ d̄``, ``F = (N − p) / (p (N − 1)) T² ~ F(p, N − p)``), or
+    ``a`` (N1, p), ``b`` (N2, p) independent samples (pooled covariance,
+    ``F = (N1 + N2 − p − 1) / (p (N1 + N2 − 2)) T² ~ F(p, N1 + N2 − p − 1)``). Drop variables that
+    are constant in both conditions (e.g. weights fixed at 1) before calling: S must be invertible.
+    """
+    a = jnp.asarray(as_array("a", a, tail=(None,)), dtype=float)
+    b = jnp.asarray(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
+    if a.ndim != 2 or b.ndim != 2:
+        raise ValueError(f"`a` and `b` must be (N, p) matrices, got {a.shape} and {b.shape}")
+    p = a.shape[1]
+    if paired:
+        if a.shape != b.shape:
+            raise ValueError(f"paired test needs equal shapes, got {a.shape} and {b.shape}")
+        N = a.shape[0]
+        if N <= p:
+            raise ValueError(f"need more subjects than variables (N = {N}, p = {p})")
+        d = a - b
+        dbar = d.mean(0)
+        dc = d - dbar[None]
+        S = dc.T @ dc / (N - 1)
+        t2 = N * dbar @ jnp.linalg.solve(S, dbar)
+        df1, df2 = p, N - p
+        f = (N - p) / (p * (N - 1)) * t2
+    else:
+        n1, n2 = a.shape[0], b.shape[0]
+        if n1 + n2 - p - 1 < 1:
+            raise ValueError(f"too few samples (N1 = {n1}, N2 = {n2}) for p = {p} variables")
+        da, db = a - a.mean(0)[None], b - b.mean(0)[None]
+        S = (da.T @ da + db.T @ db) / (n1 + n2 - 2)
+        diff = a.mean(0) - b.mean(0)
+        t2 = n1 * n2 / (n1 + n2) * diff @ jnp.linalg.solve(S, diff)
+        df1, df2 = p, n1 + n2 - p - 1
+        f = df2 / (p * (n1 + n2 - 2)) * t2
+    # F survival function through the regularised incomplete beta function
+    x = df2 / (df2 + df1 * f)
+    pval = jax.scipy.special.betainc(df2 / 2.0, df1 / 2.0, x)
+    return HotellingResult(t2=t2, f=f, df1=jnp.asarray(df1), df2=jnp.asarray(df2), p=pval)

@@ -1,0 +1,53 @@
+"""Figures for IK weights (matplotlib): estimated weights with confidence intervals."""
+
+from __future__ import annotations
+
+import numpy as np
+
+HUGMP_JOINTS = ("q1 sh. abd.", "q2 sh. flex.", "q3 sh. rot.", "q4 elbow")
+
+
+def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUGMP_JOINTS,
+                    ax=None, title=None):
+    """Grouped bar chart of weights ``w`` (P, G, n) with percentile intervals ``lo``/``hi``.
+
+    One panel per row of ``w`` (e.g. subjects, names in ``panels``), one bar group per column
+    (e.g. tasks, names in ``groups``), one bar per joint. Returns the matplotlib figure.
+    """
+    import matplotlib.pyplot as plt
+
+    w = np.asarray(w, dtype=float)
+    if w.ndim == 2:
+        w = w[None]
+        lo = None if lo is None else np.asarray(lo)[None]
+        hi = None if hi is None else np.asarray(hi)[None]
+    if w.ndim != 3:
+        raise ValueError(f"`w` must be (P, G, n) or (G, n), got shape {w.shape}")
+    P, G, n = w.shape
+    groups = groups or [f"task {g + 1}" for g in range(G)]
+    panels = panels or [f"{p + 1}" for p in range(P)]
+    if ax is None:
+        fig, axes = plt.subplots(P, 1, figsize=(max(6, 1.2 * G), 2.2 * P), sharex=True, squeeze=False)
+        axes = axes[:, 0]
+    else:
+        axes = np.atleast_1d(ax)
+        fig = axes[0].figure
+    width = 0.8 / n
+    x = np.arange(G)
+    for p in range(P):
+        a = axes[p]
+        for j in range(n):
+            err = None
+            if lo is not None and hi is not None:
+                err = np.stack([np.clip(w[p, :, j] - lo[p, :, j], 0, None),
+                                np.clip(hi[p, :, j] - w[p, :, j], 0, None)])
+            a.bar(x + (j - (n - 1) / 2) * width, w[p, :, j], width, yerr=err, capsize=2,
+                  label=joints[j] if j < len(joints) else f"joint {j + 1}")
+        a.set_ylim(0, 1.1)
+        a.set_ylabel(f"{panels[p]}\nweight")
+    axes[-1].set_xticks(x, groups)
+    axes[0].legend(ncol=n, fontsize=7, loc="upper right")
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    return fig

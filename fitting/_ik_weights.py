@@ -1,0 +1,462 @@
+"""IK-weight identification (Khoramshahi et al. 2022, Eqs 15–24, Algorithm 1), vectorised.
+
+Model (Eq 16), with diagonal ``W = diag(w)``, ``J# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` and ``N = I − J# J``:
+``q̇̄_k = J#_k ẋ_k + v̄_k``, ``v̄_k = γ N_k q̇_k``, error ``e_k = q̇_k − q̇̄_k`` (= ``(1 − γ) N_k q̇_k``
+when ``ẋ_k = J_k q̇_k``, Eq 17). Update (Eqs 18–24): ``W Ψ = Ω`` with ``Ψ = (Q̇ − V̄) Q̇ᵀ``,
+``Ω = Ū Q̇ᵀ``, ``ū_k = Jᵀ (J W⁻¹ Jᵀ)⁻¹ ẋ_k``. Because ``W`` is diagonal, the QP of Eq 24,
+``½ Σ_ij (w_i Ψ_ij − Ω_ij)²`` on the box ``[w_min, 1]ⁿ``, has the diagonal Hessian
+``H_ii = Σ_j Ψ_ij²`` and separates per joint; its exact solution is the clipped ratio
+``w_i = clip(Σ_j Ψ_ij Ω_ij / Σ_j Ψ_ij², w_min, 1)`` (tested against a QP solver). Then
+``w ← w / max w``.
+
+Arrays are samples-first: ``qdot`` (..., K, n), ``xdot`` (..., K, m), ``J`` (..., K, m, n) with any
+leading batch axes (subjects, conditions, bootstrap replicates); one compiled call for all.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from pmpjax._linalg import mv, spd_solve, to_soa
+from pmpjax._pytree import pytree_dataclass
+from pmpjax._redundancy import admittance_terms_diag_soa
+from pmpjax._validate import as_array, is_concrete
+
+from ._optimise import least_squares
+
+OK, NONFINITE, INVALID_INPUT = 0, 1, 2
+
+
+@pytree_dataclass
+class IKWeightsResult:
+    """Per-item result of :func:`estimate_ik_weights` (leading axes = the inputs' batch axes).
+
+    ``w`` (..., n) weights in ``[w_min, 1]`` with ``max w = 1`` (over free joints); ``error`` (...,)
+    the mean modelling error ``(1/K) Σ |q̇_k − q̇̄_k|`` of the last evaluation (Algorithm 1, line 8);
+    ``error_history`` (..., max_iter) one entry per iteration (NaN after the item stopped);
+    ``iterations`` (...,) updates done; ``converged`` (...,) error ≤ ``tol`` or weight change ≤
+    ``step_tol``; ``gamma`` (...,) the null-space ratio at the end; ``status`` (...,) 0 ok,
+    1 non-finite, 2 invalid input (only with ``on_invalid="flag"``).
+    """
+
+    w: jax.Array
+    error: jax.Array
+    error_history: jax.Array
+    iterations: jax.Array
+    converged: jax.Array
+    gamma: jax.Array
+    status: jax.Array
+
+
+# ---------------------------------------------------------------------------------------------
+# input checks (Python side, before tracing)
+
+
+def _check_inputs(qdot, xdot, J, mask):
+    qdot = as_array("qdot", qdot, tail=(None, None), finite=False)
+    xdot = as_array("xdot", xdot, tail=(None, None), finite=False)
+    J = as_array("J", J, tail=(None, None, None), finite=False)
+    n, m = qdot.shape[-1], xdot.shape[-1]
+    if J.shape[-2:] != (m, n):
+        raise ValueError(
+            f"`J` must have trailing shape (m, n) = ({m}, {n}) to match `xdot` (..., K, {m}) and "
+            f"`qdot` (..., K, {n}); got {tuple(J.shape)}"
+        )
+    if not m < n:
+        raise ValueError(f"IK weights need a redundant chain (m < n); got m = {m}, n = {n}")
+    lead = tuple(qdot.shape[:-1])
+    if tuple(xdot.shape[:-1]) != lead or tuple(J.shape[:-2]) != lead:
+        raise ValueError(
+            "`qdot` (..., K, n), `xdot` (..., K, m) and `J` (..., K, m, n) must share the batch "
+            f"and sample axes (..., K); got {tuple(qdot.shape)}, {tuple(xdot.shape)}, {tuple(J.shape)}"
+        )
+    if mask is not None:
+        mask = np.asarray(mask) if is_concrete(mask) else mask
+        if tuple(np.shape(mask)) != lead:
+            raise ValueError(f"`mask` must have shape (..., K) = {lead}, got {tuple(np.shape(mask))}")
+        if is_concrete(mask) and np.asarray(mask).dtype != bool:
+            raise TypeError(f"`mask` must be boolean, got dtype {np.asarray(mask).dtype}")
+    return qdot, xdot, J, mask
+
+
+def _invalid_items(qdot, xdot, J, mask, rank_tol):
+    """Per-item reasons {batch index: message} for NaN/inf velocities or rank-deficient ``J``."""
+    q, x, Jn = (np.asarray(a, dtype=float) for a in (qdot, xdot, J))
+    batch, K = q.shape[:-2], q.shape[-2]
+    B = int(np.prod(batch)) if batch else 1
+    n, m = q.shape[-1], x.shape[-1]
+    q, x, Jn = q.reshape(B, K, n), x.reshape(B, K, m), Jn.reshape(B, K, m, n)
+    valid = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
+    bad = {}
+
+    def add(flat_items, msg):
+        for b in np.nonzero(flat_items)[0]:
+            idx = tuple(int(i) for i in np.unravel_index(b, batch)) if batch else ()
+            bad.setdefault(idx, msg(b))
+
+    for name, a in (("qdot", q), ("xdot", x), ("J", Jn)):
+        nonfin = ~np.all(np.isfinite(a.reshape(B, K, -1)), axis=-1) & valid
+        add(nonfin.any(-1), lambda b, name=name: f"`{name}` contains NaN or inf")
+    Jz = np.nan_to_num(Jn)
+    JJ = np.einsum("bkij,bklj->bkil", Jz, Jz)
+    tr = np.trace(JJ, axis1=-2, axis2=-1) / m
+    # det(JJᵀ)/(tr/m)^m ≤ λ_min/λ_mean: a scale-free test for a rank-deficient Jacobian
+    ratio = np.linalg.det(JJ) / np.where(tr > 0, tr, 1.0) ** m
+    sing = ((ratio <= rank_tol) | (tr <= 0)) & valid
+    add(sing.any(-1), lambda b: f"`J` is rank-deficient (rank < m) at sample {int(np.argmax(sing[b]))}")
+    add(valid.sum(-1) == 0, lambda b: "`mask` leaves no valid sample")
+    return bad
+
+
+def _check_gamma(gamma, gamma_rate):
+    if is_concrete(gamma):
+        g = np.asarray(gamma, dtype=float)
+        if not np.all(np.isfinite(g)) or np.any(g < 0) or np.any(g > 1):
+            raise ValueError(f"`gamma` must lie in [0, 1], got {g if g.size < 8 else (g.min(), g.max())}")
+    if gamma_rate is not None:
+        c = float(gamma_rate)
+        if not (0.0 <= c <= 1.0):
+            raise ValueError(f"`gamma_rate` must lie in [0, 1] (γ ← γ + c (1 − γ)), got {c}")
+
+
+def _fixed_mask(fixed, n):
+    if fixed is None:
+        return (False,) * n
+    f = np.asarray(fixed)
+    if f.dtype == bool:
+        if f.shape != (n,):
+            raise ValueError(f"`fixed` must be a boolean (n,) = ({n},) mask or joint indices, got {f.shape}")
+        out = tuple(bool(v) for v in f)
+    else:
+        idx = np.atleast_1d(f).astype(int)
+        if np.any((idx < 0) | (idx >= n)):
+            raise ValueError(f"`fixed` joint indices must lie in [0, {n}), got {idx}")
+        out = tuple(i in set(idx.tolist()) for i in range(n))
+    if all(out):
+        raise ValueError("`fixed` cannot hold every joint")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels (component-leading: vectors (n, *batch, K), weights (n, *batch, 1))
+
+
+def _evaluate(w, Jc, xd, qd, Jq):
+    """``J# ẋ`` and ``J# J q̇`` (n, ..., K), ``ū = Jᵀ B ẋ`` through the one redundancy kernel."""
+    P, M = admittance_terms_diag_soa(Jc, 1.0 / w)  # P = W⁻¹ Jᵀ, M = J W⁻¹ Jᵀ = B⁻¹
+    y = spd_solve(M, xd)  # B ẋ
+    task = mv(P, y)  # J# ẋ = A Jᵀ B ẋ (Eq 4)
+    proj = mv(P, spd_solve(M, Jq))  # J# J q̇
+    u = w * task  # ū = Jᵀ B ẋ = W J# ẋ (Eq 18)
+    return task, proj, u
+
+
+def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
+    """Exact solution of the box QP of Eq 24 (diagonal Hessian), then normalisation (line 21)."""
+    num = jnp.sum(psi * omega, axis=1)  # −F_i = Σ_j Ψ_ij Ω_ij
+    den = jnp.sum(psi * psi, axis=1)  # H_ii = Σ_j Ψ_ij²
+    safe = den > 1e-300
+    raw = jnp.where(safe, num / jnp.where(safe, den, 1.0), w[:, ..., 0])
+    wn = jnp.clip(raw, w_min, w_max)
+    free = jnp.asarray([not f for f in fixed]).reshape((-1,) + (1,) * (wn.ndim - 1))
+    # over-specified joints (Experiment 1): set back to 1, normalise the others only
+    top = jnp.max(jnp.where(free, wn, -jnp.inf), axis=0, keepdims=True)
+    return jnp.where(free, wn / top, 1.0)
+
+
+def qp_matrices(psi, omega):
+    """Algorithm 1 lines 16–19: ``Ψ̃`` (n², n), ``Ω̃`` (n²,), ``H = Ψ̃ᵀΨ̃``, ``F = −Ω̃ᵀΨ̃``.
+
+    ``psi``, ``omega``: (n, n). Block j of ``Ψ̃`` is ``diag(Ψ_{:, j})`` and of ``Ω̃`` is ``Ω_{:, j}``.
+    """
+    psi, omega = jnp.asarray(psi), jnp.asarray(omega)
+    n = psi.shape[0]
+    Pt = jnp.concatenate([jnp.diag(psi[:, j]) for j in range(n)], axis=0)
+    Ot = jnp.concatenate([omega[:, j] for j in range(n)])
+    return Pt, Ot, Pt.T @ Pt, -(Ot @ Pt)
+
+
+def box_qp_update(psi, omega, *, w_min=1e-3, w_prev=None):
+    """Closed-form minimiser of Eq 24 on ``[w_min, 1]ⁿ`` (before normalisation), ``psi`` (..., n, n)."""
+    psi, omega = jnp.asarray(psi), jnp.asarray(omega)
+    num = jnp.sum(psi * omega, axis=-1)
+    den = jnp.sum(psi * psi, axis=-1)
+    w_prev = jnp.ones_like(num) if w_prev is None else jnp.asarray(w_prev)
+    safe = den > 1e-300
+    return jnp.clip(jnp.where(safe, num / jnp.where(safe, den, 1.0), w_prev), w_min, 1.0)
+
+
+@partial(jax.jit, static_argnames=("max_iter", "fixed"))
+def _algorithm1(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter, fixed):
+    n = qd.shape[0]
+    batch = qd.shape[1:-1]
+    vf = valid.astype(qd.dtype)
+    count = jnp.sum(vf, axis=-1)
+    Jq = mv(Jc, qd)
+    qqT = _outer_sum(qd, qd)  # Q̇ Q̇ᵀ (n, n, *batch), constant
+
+    def body(s):
+        w, V, g = s["w"], s["V"], s["gamma"]
+        task, proj, u = _evaluate(w, Jc, xd, qd, Jq)
+        # Algorithm 1 lines 7–8: error with the null-space estimate of the previous iteration
+        res = qd - task - V
+        err = jnp.sum(jnp.sqrt(jnp.sum(res * res, axis=0)) * vf, axis=-1) / count
+        Vn = g[None, ..., None] * (qd - proj) * vf[None]  # line 10: v̄ = γ (I − J# J) q̇
+        psi = qqT - _outer_sum(Vn, qd)  # Ψ = (Q̇ − V̄) Q̇ᵀ
+        omega = _outer_sum(u * vf[None], qd)  # Ω = Ū Q̇ᵀ
+        wn = _closed_form_update(w, psi, omega, w_min, w_max, fixed)[..., None]
+        active = ~s["done"]
+        finite = jnp.all(jnp.isfinite(wn), axis=(0, -1)) & jnp.isfinite(err)
+        step = jnp.max(jnp.abs(wn - w), axis=(0, -1))
+        conv = finite & ((err <= tol) | (step <= step_tol))
+        keep = lambda new, old: jnp.where(_bmask(active), new, old)  # noqa: E731
+        it = s["it"]
+        hist = s["hist"].at[it].set(jnp.where(active, err, jnp.nan))
+        g_next = g + rate * (1.0 - g)  # γ_{t+1} = γ_t + c (1 − γ_t); c = 0: constant
+        return dict(
+            w=keep(jnp.where(finite[None, ..., None], wn, w), w),
+            V=keep(Vn, V),
+            gamma=jnp.where(active, g_next, g),
+            err=jnp.where(active, err, s["err"]),
+            hist=hist,
+            iters=s["iters"] + active.astype(s["iters"].dtype),
+            conv=jnp.where(active, conv, s["conv"]),
+            fin=jnp.where(active, finite, s["fin"]),
+            done=s["done"] | conv | ~finite,
+            it=it + 1,
+        )
+
+    def cond(s):
+        return (s["it"] < max_iter) & ~jnp.all(s["done"])
+
+    s0 = dict(
+        w=jnp.ones((n,) + batch + (1,), qd.dtype),
+        V=jnp.zeros_like(qd),
+        gamma=jnp.broadcast_to(gamma0, batch).astype(qd.dtype),
+        err=jnp.full(batch, jnp.nan, qd.dtype),
+        hist=jnp.full((max_iter,) + batch, jnp.nan, qd.dtype),
+        iters=jnp.zeros(batch, jnp.int32),
+        conv=jnp.zeros(batch, bool),
+        fin=jnp.ones(batch, bool),
+        done=count == 0,
+        it=jnp.asarray(0),
+    )
+    s = lax.while_loop(cond, body, s0)
+    return s["w"][..., 0], s["err"], s["hist"], s["iters"], s["conv"], s["gamma"], s["fin"]
+
+
+def _outer_sum(a, b):
+    """``Σ_k a_k b_kᵀ`` (n, n, *batch) of component-leading (n, *batch, K) arrays."""
+    return jnp.sum(a[:, None] * b[None], axis=-1)
+
+
+def _bmask(active):
+    """Per-item flags (*batch) shaped to broadcast against component-leading (c, *batch, 1|K)."""
+    return active.reshape((1,) + active.shape + (1,))
+
+
+def _prepare(qdot, xdot, J, mask):
+    """Component-leading float arrays with masked samples replaced by harmless values."""
+    qdot, xdot, J = (jnp.asarray(a, dtype=jnp.result_type(float)) for a in (qdot, xdot, J))
+    lead = qdot.shape[:-1]
+    valid = jnp.ones(lead, bool) if mask is None else jnp.asarray(mask, bool)
+    m, n = J.shape[-2:]
+    safe_J = jnp.eye(m, n, dtype=J.dtype)
+    Jv = jnp.where(valid[..., None, None], J, safe_J)
+    qv = jnp.where(valid[..., None], qdot, 0.0)
+    xv = jnp.where(valid[..., None], xdot, 0.0)
+    return to_soa(qv), to_soa(xv), to_soa(Jv, 2), valid
+
+
+def _screen(qdot, xdot, J, mask, on_invalid, rank_tol):
+    """Raise on (or collect, for ``on_invalid='flag'``) items with unusable data."""
+    if on_invalid not in ("raise", "flag"):
+        raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
+    if not is_concrete(qdot, xdot, J, mask):
+        return mask, None
+    bad = _invalid_items(qdot, xdot, J, mask, rank_tol)
+    lead = tuple(np.shape(qdot)[:-2])
+    flags = np.zeros(lead, bool)
+    if bad:
+        if on_invalid == "raise":
+            idx, msg = next(iter(bad.items()))
+            where = f" (item {tuple(int(i) for i in idx)})" if lead else ""
+            raise ValueError(f"{msg}{where}; pass on_invalid='flag' to flag such items instead")
+        for idx in bad:
+            flags[idx] = True
+        # flagged items: no valid samples, so they stop at once and report status 2
+        base = np.ones(np.shape(qdot)[:-1], bool) if mask is None else np.asarray(mask, bool).copy()
+        base[flags] = False
+        mask = base
+    return mask, flags
+
+
+def estimate_ik_weights(
+    qdot,
+    xdot,
+    J,
+    gamma=0.6,
+    *,
+    mask=None,
+    w_min: float = 1e-3,
+    w_max: float | None = 1.0,
+    tol: float = 1e-3,
+    step_tol: float = 1e-6,
+    max_iter: int = 200,
+    gamma_rate: float | None = None,
+    fixed=None,
+    on_invalid: str = "raise",
+    rank_tol: float = 1e-10,
+) -> IKWeightsResult:
+    """IK weights ``w`` (..., n) by Algorithm 1 of Khoramshahi et al. (2022), for every batch item.
+
+    **Arguments:** ``qdot`` (..., K, n) joint velocities [rad/s]; ``xdot`` (..., K, m) task
+    velocities; ``J`` (..., K, m, n) Jacobians; ``gamma`` null-space projection ratio in [0, 1]
+    (scalar or (...,) per item); ``mask`` (..., K) bool valid samples (ragged trials); ``w_min`` the
+    positive floor of the box ``[w_min, w_max]``; ``w_max`` its upper bound (1 in the paper; ``None``
+    drops it, which makes the update scale-free: with the bound, raw weights above 1 are clipped
+    before the normalisation and their ratios are lost, which can stall the iteration); ``tol``
+    the mean-error threshold ε (line 2);
+    ``step_tol`` stop when no weight changes by more than this; ``max_iter`` iteration cap;
+    ``gamma_rate`` c of the schedule ``γ ← γ + c (1 − γ)`` after each iteration (None: constant);
+    ``fixed`` joints (bool (n,) mask or indices) held at 1 and left out of the normalisation (the
+    over-specified-joint convention of Experiment 1); ``on_invalid`` 'raise' (default) or 'flag'
+    items with NaN/inf velocities or rank-deficient Jacobians (``status`` 2, ``w`` NaN) while the
+    others go on; ``rank_tol`` threshold on ``det(JJᵀ)/(tr(JJᵀ)/m)^m``.
+
+    **Returns:** :class:`IKWeightsResult`. Not differentiable (clipping, stopping rule); see
+    :func:`estimate_ik_weights_lm` for the gradient-based variant.
+    """
+    qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
+    _check_gamma(gamma, gamma_rate)
+    if not (0.0 < float(w_min) < 1.0):
+        raise ValueError(f"`w_min` must lie in (0, 1), got {w_min}")
+    if w_max is not None and not float(w_max) >= 1.0:
+        raise ValueError(f"`w_max` must be >= 1 or None, got {w_max}")
+    if int(max_iter) != max_iter or max_iter < 1:
+        raise ValueError(f"`max_iter` must be a positive integer, got {max_iter}")
+    n = qdot.shape[-1]
+    fixed_t = _fixed_mask(fixed, n)
+    mask, flags = _screen(qdot, xdot, J, mask, on_invalid, rank_tol)
+    batch = tuple(qdot.shape[:-2])
+    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    if g.ndim and tuple(np.broadcast_shapes(g.shape, batch)) != batch:
+        raise ValueError(f"`gamma` must be a scalar or broadcast to the batch shape {batch}, got {g.shape}")
+    qd, xd, Jc, valid = _prepare(qdot, xdot, J, mask)
+    w, err, hist, iters, conv, gam, fin = _algorithm1(
+        qd, xd, Jc, valid, jnp.broadcast_to(g, batch), jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
+        jnp.asarray(float(w_min)), jnp.asarray(np.inf if w_max is None else float(w_max)),
+        jnp.asarray(float(tol)), jnp.asarray(float(step_tol)),
+        max_iter=int(max_iter), fixed=fixed_t,
+    )
+    w = jnp.moveaxis(w, 0, -1)
+    hist = jnp.moveaxis(hist, 0, -1)
+    status = jnp.where(fin, OK, NONFINITE)
+    if flags is not None and flags.any():
+        fl = jnp.asarray(flags)
+        status = jnp.where(fl, INVALID_INPUT, status)
+        w = jnp.where(fl[..., None], jnp.nan, w)
+        err = jnp.where(fl, jnp.nan, err)
+        conv = conv & ~fl
+    return IKWeightsResult(w=w, error=err, error_history=hist, iterations=iters, converged=conv,
+                           gamma=gam, status=status)
+
+
+# ---------------------------------------------------------------------------------------------
+# the modelling error as a differentiable function, and the gradient-based variant
+
+
+def _model_residual(w, qdot, xdot, J, gamma, valid):
+    """``e_k = q̇_k − J#ẋ_k − γ (I − J# J) q̇_k = (1 − γ) q̇_k − J# (ẋ_k − γ J q̇_k)`` (n, ..., K)
+    for weights ``w`` (n, ..., 1) (Eq 16)."""
+    P, M = admittance_terms_diag_soa(J, 1.0 / w)
+    e = (1.0 - gamma) * qdot - mv(P, spd_solve(M, xdot - gamma * mv(J, qdot)))
+    return e * valid[None]
+
+
+def ik_model_error(w, qdot, xdot, J, gamma=0.0, *, mask=None):
+    """Mean modelling error ``(1/K) Σ_k |e_k|`` (...,) of weights ``w`` (..., n) (Eqs 16–17).
+
+    Differentiable in ``w`` and the data; invariant to the scale of ``w`` (Eq 4).
+    """
+    qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
+    w = as_array("w", w, tail=(qdot.shape[-1],))
+    qd, xd, Jc, valid = _prepare(qdot, xdot, J, mask)
+    w = jnp.broadcast_to(jnp.asarray(w, dtype=qd.dtype), tuple(qdot.shape[:-2]) + (qdot.shape[-1],))
+    wc = to_soa(w)[..., None]
+    g = jnp.asarray(gamma, dtype=qd.dtype)
+    g = g.reshape((1,) + g.shape + (1,)) if g.ndim else g
+    r = _model_residual(wc, qd, xd, Jc, g, valid.astype(qd.dtype))
+    norm = jnp.sqrt(jnp.sum(r * r, axis=0) + 1e-300)
+    return jnp.sum(norm * valid, axis=-1) / jnp.sum(valid, axis=-1)
+
+
+def _lm_residual(theta, args):
+    qd, xd, Jc, valid, gamma, free, base = args
+    logw = base.at[free].set(theta)
+    r = _model_residual(jnp.exp(logw)[:, None], qd, xd, Jc, gamma, valid)
+    scale = 1.0 / jnp.sqrt(jnp.maximum(jnp.sum(valid), 1.0))
+    # one gauge residual pins the scale freedom (Eq 4: e is invariant to w → c w)
+    return jnp.concatenate([r.reshape(-1) * scale, jnp.atleast_1d(1e-3 * jnp.mean(theta))])
+
+
+@partial(jax.jit, static_argnames=("free", "max_steps"))
+def _lm_batch(qd, xd, Jc, valid, gamma, *, free, max_steps):
+    n = qd.shape[0]
+    free_idx = jnp.asarray(free)
+    base = jnp.zeros(n, qd.dtype)
+
+    def one(q, x, Jb, v, g):
+        res = least_squares(_lm_residual, jnp.zeros(len(free), qd.dtype),
+                            (q, x, Jb, v, g, free_idx, base), max_steps=max_steps)
+        logw = base.at[free_idx].set(res.x)
+        logw = jnp.where(base.at[free_idx].set(1.0) > 0, logw - jnp.max(res.x), 0.0)
+        return jnp.exp(logw), res.cost, res.steps, res.converged
+
+    # move batch to the front for vmap: (n, B, K) -> (B, n, K)
+    f = lambda a: jnp.moveaxis(a, 1, 0)  # noqa: E731
+    return jax.vmap(one)(f(qd), f(xd), jnp.moveaxis(Jc, 2, 0), valid, gamma)
+
+
+@pytree_dataclass
+class IKWeightsLMResult:
+    """``w`` (..., n) normalised weights; ``cost`` ½ Σ|e|²/K at the optimum; ``steps``; ``converged``."""
+
+    w: jax.Array
+    cost: jax.Array
+    steps: jax.Array
+    converged: jax.Array
+
+
+def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float = 1e-3,
+                           fixed=None, max_steps: int = 100) -> IKWeightsLMResult:
+    """Gradient-based variant: minimise ``(1/K) Σ_k |e_k|²`` (Eq 16) over log-weights by LM.
+
+    Same inputs as :func:`estimate_ik_weights`. The parameters are ``log w`` of the free joints
+    (positivity without bounds); the scale freedom is pinned by a small gauge residual and the
+    result normalised to ``max w = 1`` (free joints), then floored at ``w_min``. When
+    ``ẋ = J q̇`` holds exactly, ``e_k = (1 − γ) N q̇_k`` and the minimiser does not depend on γ.
+    """
+    qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
+    _check_gamma(gamma, None)
+    mask, flags = _screen(qdot, xdot, J, mask, "raise", 1e-10)
+    n = qdot.shape[-1]
+    fixed_t = _fixed_mask(fixed, n)
+    free = tuple(i for i in range(n) if not fixed_t[i])
+    batch = tuple(qdot.shape[:-2])
+    K = qdot.shape[-2]
+    B = int(np.prod(batch)) if batch else 1
+    qd, xd, Jc, valid = _prepare(qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)),
+                                 J.reshape((B, K) + tuple(J.shape[-2:])),
+                                 None if mask is None else jnp.asarray(mask).reshape(B, K))
+    g = jnp.broadcast_to(jnp.asarray(gamma, dtype=qd.dtype), batch).reshape(B)
+    w, cost, steps, conv = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
+                                     max_steps=int(max_steps))
+    w = jnp.maximum(w, w_min)
+    return IKWeightsLMResult(w=w.reshape(batch + (n,)), cost=cost.reshape(batch),
+                             steps=steps.reshape(batch), converged=conv.reshape(batch))

@@ -1,0 +1,87 @@
+"""4-DoF shoulder–elbow arm (HuG-MP convention; also the 4-DoF chain of the IK paper's Exp. 1).
+
+Shoulder-centred frame: x forward, y to the subject's left, z up; zero pose = arm hanging down,
+elbow straight. ``p(q) = Rx(q1) Ry(q2) Rz(−q3) ([0, 0, −L1] + Ry(−q4) [0, 0, −L2])`` [m], angles
+[rad]: q1 < 0 abduction, q2 < 0 forward flexion, q3 < 0 internal rotation, q4 > 0 elbow flexion.
+This chain was inferred from the HuG-MP recordings (see ``pmpjax/data/hugmp/README.md``); it is
+the best available reading, not a published formula.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._kinematics import Chain
+from ._pytree import pytree_dataclass, static_field
+from ._validate import as_array, check_positive
+
+
+def _rot(axis, t):
+    """Elementary rotation as a nested list [[.]*3]*3 of arrays (component-leading)."""
+    c, s = jnp.cos(t), jnp.sin(t)
+    o, z = jnp.ones_like(t), jnp.zeros_like(t)
+    return {
+        0: [[o, z, z], [z, c, -s], [z, s, c]],
+        1: [[c, z, s], [z, o, z], [-s, z, c]],
+        2: [[c, -s, z], [s, c, z], [z, z, o]],
+    }[axis]
+
+
+def _mul(A, B):
+    return [[sum(A[i][k] * B[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+@pytree_dataclass
+class Arm4(Chain):
+    """Shoulder (3 rotations) + elbow chain, hand position ``x`` (3,) [m] relative to the shoulder.
+
+    ``L1`` upper-arm and ``L2`` forearm-to-hand lengths [m] are array leaves (differentiable,
+    vmappable). Analytic Jacobian: column i is ``a_i × (p − o_i)`` with the joint axes
+    ``a1 = x̂``, ``a2 = Rx ŷ``, ``a3 = −Rx Ry ẑ``, ``a4 = −Rx Ry Rz ŷ`` and ``o_4`` the elbow.
+    The Jacobian loses rank with the elbow straight (q4 = 0).
+    """
+
+    L1: jax.Array = 0.30
+    L2: jax.Array = 0.33
+    n: int = static_field(default=4)
+    m: int = static_field(default=3)
+
+    def __post_init__(self):
+        for name in ("L1", "L2"):
+            v = as_array(name, getattr(self, name))
+            check_positive(name, v)
+            object.__setattr__(self, name, jnp.asarray(v, dtype=float))
+
+    def fk_jac_soa(self, qc):
+        q1, q2, q3, q4 = qc[0], qc[1], qc[2], qc[3]
+        R1 = _rot(0, q1)
+        R12 = _mul(R1, _rot(1, q2))
+        R123 = _mul(R12, _rot(2, -q3))
+        R1234 = _mul(R123, _rot(1, -q4))
+        L1, L2 = self.L1, self.L2
+        elbow = [-L1 * R123[i][2] for i in range(3)]
+        p = [elbow[i] - L2 * R1234[i][2] for i in range(3)]
+        one, zero = jnp.ones_like(q1), jnp.zeros_like(q1)
+        a1 = [one, zero, zero]
+        a2 = [R1[i][1] for i in range(3)]
+        a3 = [-R12[i][2] for i in range(3)]
+        a4 = [-R123[i][1] for i in range(3)]
+        fore = [p[i] - elbow[i] for i in range(3)]
+        cols = [_cross(a1, p), _cross(a2, p), _cross(a3, p), _cross(a4, fore)]
+        J = jnp.stack([jnp.stack([cols[j][i] for j in range(4)]) for i in range(3)])
+        return jnp.stack(p), J
+
+    def reachable(self, x):
+        r = np.linalg.norm(np.asarray(x, dtype=float), axis=-1)
+        L1, L2 = float(self.L1), float(self.L2)
+        return (r <= 0.999 * (L1 + L2)) & (r >= abs(L1 - L2) + 1e-3 * (L1 + L2))
+
+    def workspace_description(self):
+        L1, L2 = float(self.L1), float(self.L2)
+        return f"shell {abs(L1 - L2):.3g} m < |x| < {L1 + L2:.3g} m"

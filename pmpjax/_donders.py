@@ -1,0 +1,155 @@
+"""Donders surfaces (design §3.4): torsion as a quadratic of the pointing components.
+
+Orientations are rotation vectors ``r = (r_x, r_y, r_z)`` [rad] (axis·angle, see
+``_orientation``); the surface is
+
+    r_x = c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²,
+
+fitted by linear least squares (QR). Its *thickness* is the RMS torsion residual [rad]. The
+model's surface comes from the equilibrium postures (§3.1) of ``(KJ, q_rest)`` over a grid of
+pointing targets.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._equilibria import equilibrium_posture
+from ._kinematics import Wrist
+from ._orientation import rotvec_from_joint_angles
+from ._pytree import pytree_dataclass
+from ._validate import as_array
+
+SCREEN_HALF_ANGLE_DEG = 20.0  # the pointing area of the Donders experiments: ±20°
+
+
+@pytree_dataclass
+class DondersSurface:
+    """``coef`` (..., 6) ``c0..c5`` [rad, 1, 1, 1/rad, 1/rad, 1/rad]; ``stderr`` (..., 6) their
+    standard errors (``σ² (AᵀA)⁻¹``, ``σ² = SSR / (N − 6)``); ``thickness`` (...,) RMS residual
+    [rad]; ``n`` (...,) number of samples used."""
+
+    coef: jax.Array
+    stderr: jax.Array
+    thickness: jax.Array
+    n: jax.Array
+
+    def __call__(self, r_y, r_z):
+        """Torsion ``r_x`` [rad] on the surface at ``(r_y, r_z)`` (broadcast against ``coef[..., 0]``)."""
+        return evaluate_surface(self.coef, r_y, r_z)
+
+
+def _design(r_y, r_z):
+    return jnp.stack([jnp.ones_like(r_y), r_y, r_z, r_y**2, r_y * r_z, r_z**2], -1)
+
+
+def evaluate_surface(coef, r_y, r_z):
+    """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²``; ``coef`` (..., 6)."""
+    coef = jnp.asarray(coef)
+    r_y, r_z = jnp.asarray(r_y, coef.dtype), jnp.asarray(r_z, coef.dtype)
+    shape = jnp.broadcast_shapes(coef.shape[:-1], r_y.shape, r_z.shape)
+    A = _design(jnp.broadcast_to(r_y, shape), jnp.broadcast_to(r_z, shape))
+    return jnp.sum(A * jnp.broadcast_to(coef, shape + (6,)), axis=-1)
+
+
+def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 21):
+    """Surface on an ``n × n`` grid of ``(r_y, r_z) ∈ [−extent, extent]²`` [rad].
+
+    Returns ``(r_y (n, n), r_z (n, n), r_x (..., n, n))``."""
+    coef = surface_or_coef.coef if isinstance(surface_or_coef, DondersSurface) else surface_or_coef
+    coef = jnp.asarray(coef)
+    g = jnp.linspace(-extent, extent, n)
+    ry, rz = jnp.meshgrid(g, g, indexing="ij")
+    return ry, rz, evaluate_surface(coef[..., None, None, :], ry, rz)
+
+
+@jax.jit
+def _fit(r, w):
+    A = _design(r[..., 1], r[..., 2]) * w[..., None]
+    b = r[..., 0] * w
+    Q, R = jnp.linalg.qr(A)
+    coef = jax.scipy.linalg.solve_triangular(R, jnp.einsum("...ni,...n->...i", Q, b)[..., None])[..., 0]
+    resid = (b - jnp.einsum("...ni,...i->...n", A, coef)) * w
+    n = jnp.sum(w, axis=-1)
+    ssr = jnp.sum(resid**2, axis=-1)
+    Rinv = jax.scipy.linalg.solve_triangular(R, jnp.broadcast_to(jnp.eye(6), R.shape))
+    var = jnp.sum(Rinv**2, axis=-1)  # diag((RᵀR)⁻¹) = row norms² of R⁻¹
+    sigma2 = ssr / jnp.maximum(n - 6, 1)
+    return DondersSurface(
+        coef=coef, stderr=jnp.sqrt(sigma2[..., None] * var), thickness=jnp.sqrt(ssr / n), n=n
+    )
+
+
+def fit_donders_surface(r, mask=None) -> DondersSurface:
+    """Least-squares Donders surface of rotation vectors ``r`` (..., N, 3) [rad].
+
+    ``mask`` (..., N) bool selects samples (ragged subjects); leading axes are fitted
+    independently. Raises ``ValueError`` for NaN/inf, wrong shapes, or fewer than 7 samples.
+    """
+    r = as_array("r", r, tail=(None, 3))
+    r = jnp.asarray(r, jnp.result_type(float))
+    if mask is None:
+        w = jnp.ones(r.shape[:-1], r.dtype)
+    else:
+        mask = np.asarray(mask)
+        if mask.shape != tuple(r.shape[:-1]):
+            raise ValueError(f"`mask` must have shape {tuple(r.shape[:-1])}, got {mask.shape}")
+        w = jnp.asarray(mask, r.dtype)
+    n = np.asarray(jnp.sum(w, axis=-1))
+    if np.any(n < 7):
+        raise ValueError(f"`r` needs at least 7 (unmasked) samples per surface, got {int(n.min())}")
+    return _fit(r, w)
+
+
+def screen_grid(n: int = 9, *, half_angle_deg: float = SCREEN_HALF_ANGLE_DEG, d: float = 1.0):
+    """``n × n`` pointing targets (n², 2) [m] covering the ±``half_angle_deg`` screen area
+    (``|x_i| ≤ d sin(half_angle)``, Eq 6 at distance ``d``)."""
+    h = d * np.sin(np.deg2rad(half_angle_deg))
+    g = np.linspace(-h, h, n)
+    return np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+
+
+def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = None):
+    """The model's Donders surface: equilibria (§3.1) of ``(KJ (..., 3, 3), q_rest (..., 3))``
+    at ``pointing`` (P, 2) targets (default a 9 × 9 grid over ±20°), their rotation vectors, and
+    the surface fitted to them.
+
+    Returns ``(surface, r (..., P, 3), q (..., P, 3))``. Differentiable in ``KJ``, ``q_rest``.
+    """
+    chain = Wrist() if chain is None else chain
+    pointing = screen_grid() if pointing is None else pointing
+    KJ = jnp.asarray(KJ)
+    q_rest = jnp.asarray(q_rest)
+    q = equilibrium_posture(chain, KJ[..., None, :, :], q_rest[..., None, :], pointing)
+    r = rotvec_from_joint_angles(q)
+    return fit_donders_surface(r), r, q
+
+
+def plot_donders(r=None, surfaces=(), *, labels=None, ax=None, extent=np.deg2rad(20.0), n=15):
+    """3-D plot of rotation-vector samples ``r`` (N, 3) and Donders surfaces (degrees on all axes).
+
+    ``surfaces`` is a sequence of :class:`DondersSurface` or coefficient vectors (6,). Axes:
+    ``r_y`` and ``r_z`` horizontal, torsion ``r_x`` vertical. Returns the matplotlib ``Axes``.
+    """
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        ax = plt.figure(figsize=(6, 5)).add_subplot(projection="3d")
+    deg = np.rad2deg
+    if r is not None:
+        r = np.asarray(r)
+        ax.scatter(deg(r[..., 1]), deg(r[..., 2]), deg(r[..., 0]), s=4, alpha=0.5, label="data")
+    if isinstance(surfaces, DondersSurface) or np.ndim(surfaces) == 1:
+        surfaces = [surfaces]
+    for i, s in enumerate(surfaces):
+        ry, rz, rx = (np.asarray(a) for a in surface_grid(s, extent=extent, n=n))
+        lab = labels[i] if labels is not None else None
+        ax.plot_wireframe(deg(ry), deg(rz), deg(rx), color=f"C{i + 1}", linewidth=0.6, label=lab)
+    ax.set_xlabel("r_y [deg]")
+    ax.set_ylabel("r_z [deg]")
+    ax.set_zlabel("torsion r_x [deg]")
+    if r is not None or labels is not None:
+        ax.legend(loc="upper left", fontsize="small")
+    return ax

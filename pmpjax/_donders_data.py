@@ -1,0 +1,326 @@
+"""Donders recordings: steady wrist postures at pointing positions; synthetic data and file I/O.
+
+A :class:`DondersRecording` holds, for S subjects with up to N samples each,
+
+- ``subjects`` (S,) names, ``quat`` (S, N, 4) hand orientations (unit, scalar-first ``w, x, y, z``,
+  hand-to-world, the frame of Eq 6), ``pointing`` (S, N, 2) screen points ``(x1, x2)`` [m] at
+  distance ``d`` [m], ``mask`` (S, N) valid samples (subjects may have different counts).
+
+File formats (one schema, two encodings; ``write_recordings``/``read_recordings`` pick by suffix):
+
+- **CSV** (long format, one row per sample; ``#`` lines are comments and may carry ``d=<metres>``)::
+
+      # pmpjax donders v1
+      # d=1.0
+      subject,sample,qw,qx,qy,qz,x1,x2
+      subj1,0,0.99,0.01,-0.05,0.08,0.16,0.09
+
+  Required columns: ``subject``, ``sample`` (integer, unique per subject) and either the
+  quaternion ``qw, qx, qy, qz`` or the joint angles ``q_ps, q_fe, q_rud`` [rad] (Eq 6 order);
+  ``x1, x2`` [m]. Extra columns are ignored; quaternions win when both are present.
+- **NPZ**: arrays ``subjects`` (S,) str, ``quat`` (S, N, 4), ``pointing`` (S, N, 2), ``mask``
+  (S, N) bool, ``d`` () and ``format`` = "pmpjax donders v1".
+
+Readers are strict: empty or malformed files, missing columns, non-numeric fields, NaN/inf,
+duplicate samples, non-unit quaternions (|‖q‖ − 1| > 1e-3) and pointing outside the wrist's
+reachable screen raise ``ValueError`` naming the file, line/array and problem.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import os
+
+import numpy as np
+
+from ._donders import SCREEN_HALF_ANGLE_DEG
+from ._equilibria import equilibrium_posture
+from ._kinematics import Wrist
+from ._orientation import (
+    joint_angles_from_quat,
+    matrix_from_rotvec,
+    quat_from_joint_angles,
+    quat_from_matrix,
+    wrist_rotation,
+)
+
+FORMAT = "pmpjax donders v1"
+_QUAT_COLS = ("qw", "qx", "qy", "qz")
+_JOINT_COLS = ("q_ps", "q_fe", "q_rud")
+
+
+@dataclasses.dataclass(frozen=True)
+class DondersRecording:
+    """Steady postures of S subjects (see module docstring for shapes and units)."""
+
+    subjects: tuple[str, ...]
+    quat: np.ndarray
+    pointing: np.ndarray
+    mask: np.ndarray
+    d: float = 1.0
+
+    def __post_init__(self):
+        _check_recording(self, "recording")
+
+    @property
+    def joint_angles(self) -> np.ndarray:
+        """Wrist joint angles (S, N, 3) [rad] (branch |q_FE| < π/2); masked samples are 0."""
+        q = np.asarray(joint_angles_from_quat(self.quat))
+        return np.where(self.mask[..., None], q, 0.0)
+
+    @property
+    def n_samples(self) -> np.ndarray:
+        return self.mask.sum(axis=-1)
+
+
+def _check_recording(rec: DondersRecording, where: str):
+    S = len(rec.subjects)
+    quat, pointing, mask = (np.asarray(a) for a in (rec.quat, rec.pointing, rec.mask))
+    if S == 0 or quat.ndim != 3 or quat.shape[0] != S or quat.shape[1] == 0 or quat.shape[2] != 4:
+        raise ValueError(
+            f"{where}: `quat` must have shape (S, N, 4) with S = {S} subjects, N > 0; got {quat.shape}"
+        )
+    if pointing.shape != quat.shape[:2] + (2,):
+        raise ValueError(f"{where}: `pointing` must have shape {quat.shape[:2] + (2,)}, got {pointing.shape}")
+    if mask.shape != quat.shape[:2] or mask.dtype != bool:
+        raise ValueError(
+            f"{where}: `mask` must be a bool array of shape {quat.shape[:2]}, got {mask.dtype} {mask.shape}"
+        )
+    if len(set(rec.subjects)) != S:
+        raise ValueError(f"{where}: subject names must be unique, got {list(rec.subjects)}")
+    for name, a in (("quat", quat), ("pointing", pointing)):
+        bad = mask & ~np.all(np.isfinite(a), axis=-1)
+        if bad.any():
+            s, i = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{where}: `{name}` has NaN/inf ({int(bad.sum())} samples; first: subject "
+                f"{rec.subjects[s]!r}, sample {i})"
+            )
+    norm = np.where(mask, np.linalg.norm(np.nan_to_num(quat), axis=-1), 1.0)
+    if np.any(np.abs(norm - 1.0) > 1e-3):
+        s, i = np.argwhere(np.abs(norm - 1.0) > 1e-3)[0]
+        raise ValueError(
+            f"{where}: `quat` must be unit quaternions; |q| = {norm[s, i]:.6g} at subject "
+            f"{rec.subjects[s]!r}, sample {i}"
+        )
+    if not (np.isfinite(rec.d) and rec.d > 0):
+        raise ValueError(f"{where}: `d` must be a positive distance [m], got {rec.d}")
+    chain = Wrist(d=float(rec.d))
+    chain.check_target(f"{where}: pointing", pointing[mask])
+    if np.any(mask.sum(-1) == 0):
+        raise ValueError(f"{where}: subject {rec.subjects[int(np.argmin(mask.sum(-1)))]!r} has no samples")
+
+
+def synthetic_recordings(
+    KJ,
+    q_rest,
+    n_samples: int,
+    *,
+    noise_deg: float = 0.5,
+    seed: int = 0,
+    half_angle_deg: float = SCREEN_HALF_ANGLE_DEG,
+    d: float = 1.0,
+    names=None,
+) -> DondersRecording:
+    """Synthetic steady postures of subjects ``(KJ (S, 3, 3), q_rest (S, 3))``.
+
+    Targets are uniform over the ±``half_angle_deg`` screen square (``|x_i| ≤ d sin(angle)``);
+    the posture is the equilibrium (§3.1); noise is a random rotation in the hand frame with RMS
+    angle ``noise_deg`` (scalar or (S,); isotropic Gaussian rotation vector, each component
+    ``N(0, noise²/3)``), ``R_obs = R(q_eq) exp(ε̂)``. As
+    with an IMU, the recorded pointing is the point the *noisy* orientation points at (Eq 6), so
+    pointing and orientation are consistent. Seeded (``numpy.random.default_rng(seed)``).
+    """
+    KJ = np.asarray(KJ, dtype=float)
+    q_rest = np.asarray(q_rest, dtype=float)
+    if KJ.ndim == 2:
+        KJ, q_rest = KJ[None], q_rest[None]
+    S = KJ.shape[0]
+    if int(n_samples) != n_samples or n_samples < 1:
+        raise ValueError(f"`n_samples` must be a positive integer, got {n_samples}")
+    noise = np.broadcast_to(np.asarray(noise_deg, dtype=float), (S,)) if np.ndim(noise_deg) <= 1 else None
+    if noise is None or not np.all(np.isfinite(noise) & (noise >= 0)):
+        raise ValueError(f"`noise_deg` must be >= 0 (scalar or one per subject), got {noise_deg}")
+    names = tuple(names) if names is not None else tuple(f"subj{i + 1}" for i in range(S))
+    if len(names) != S:
+        raise ValueError(f"`names` must have {S} entries, got {len(names)}")
+    rng = np.random.default_rng(seed)
+    chain = Wrist(d=float(d))
+    h = d * np.sin(np.deg2rad(half_angle_deg))
+    targets = rng.uniform(-h, h, size=(S, n_samples, 2))
+    q = equilibrium_posture(chain, KJ[:, None], q_rest[:, None], targets)
+    eps = rng.normal(size=(S, n_samples, 3)) * (np.deg2rad(noise)[:, None, None] / np.sqrt(3.0))
+    R = wrist_rotation(q) @ matrix_from_rotvec(eps)
+    quat = np.asarray(quat_from_matrix(R))
+    pointing = np.asarray(d * np.stack([-R[..., 1, 0], R[..., 2, 0]], -1))
+    return DondersRecording(names, quat, pointing, np.ones((S, n_samples), bool), float(d))
+
+
+def recording_from_arrays(subjects, pointing, *, quat=None, joint_angles=None, mask=None, d=1.0):
+    """Build a validated :class:`DondersRecording` from arrays (S, N, ·); give ``quat`` or
+    ``joint_angles``."""
+    pointing = np.asarray(pointing, dtype=float)
+    if (quat is None) == (joint_angles is None):
+        raise ValueError("give exactly one of `quat` (S, N, 4) or `joint_angles` (S, N, 3)")
+    if quat is None:
+        ja = np.asarray(joint_angles, dtype=float)
+        if ja.shape[-1:] != (3,):
+            raise ValueError(f"`joint_angles` must have trailing shape (3,), got {ja.shape}")
+        quat = np.asarray(quat_from_joint_angles(np.nan_to_num(ja)))
+        quat = np.where(np.isfinite(ja).all(-1, keepdims=True), quat, np.nan)
+    quat = np.asarray(quat, dtype=float)
+    mask = np.ones(quat.shape[:2], bool) if mask is None else np.asarray(mask, bool)
+    return DondersRecording(tuple(str(s) for s in subjects), quat, pointing, mask, float(d))
+
+
+# --- files -----------------------------------------------------------------------------------
+
+
+def write_recordings(path, rec: DondersRecording) -> None:
+    """Write ``rec`` to ``path`` (``.csv`` or ``.npz``, see module docstring)."""
+    path = os.fspath(path)
+    if path.endswith(".npz"):
+        np.savez(
+            path,
+            subjects=np.array(rec.subjects),
+            quat=rec.quat,
+            pointing=rec.pointing,
+            mask=rec.mask,
+            d=np.float64(rec.d),
+            format=np.array(FORMAT),
+        )
+        return
+    if not path.endswith(".csv"):
+        raise ValueError(f"`path` must end in .csv or .npz, got {path!r}")
+    q = rec.joint_angles
+    with open(path, "w", newline="") as f:
+        f.write(f"# {FORMAT}\n# d={rec.d!r}\n")
+        w = csv.writer(f)
+        w.writerow(("subject", "sample") + _QUAT_COLS + ("x1", "x2") + _JOINT_COLS)
+        for s, name in enumerate(rec.subjects):
+            for i in np.flatnonzero(rec.mask[s]):
+                w.writerow(
+                    [name, int(i)]
+                    + [repr(float(v)) for v in rec.quat[s, i]]
+                    + [repr(float(v)) for v in rec.pointing[s, i]]
+                    + [repr(float(v)) for v in q[s, i]]
+                )
+
+
+def read_recordings(path) -> DondersRecording:
+    """Read a recording written by :func:`write_recordings` or by hand in the same format."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ValueError(f"`path`: no such file {path!r}")
+    if path.endswith(".npz"):
+        return _read_npz(path)
+    if path.endswith(".csv"):
+        return _read_csv(path)
+    raise ValueError(f"`path` must end in .csv or .npz, got {path!r}")
+
+
+def _read_npz(path):
+    try:
+        z = np.load(path, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001 - numpy raises several types for corrupt files
+        raise ValueError(f"{path}: not a readable .npz file ({e})") from e
+    with z:
+        missing = [k for k in ("subjects", "quat", "pointing", "mask") if k not in z.files]
+        if missing:
+            raise ValueError(f"{path}: missing array(s) {missing}; expected subjects, quat, pointing, mask")
+        if "format" in z.files and str(z["format"]) != FORMAT:
+            raise ValueError(f"{path}: unknown format {str(z['format'])!r}, expected {FORMAT!r}")
+        try:
+            quat = np.asarray(z["quat"], dtype=float)
+            pointing = np.asarray(z["pointing"], dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{path}: `quat`/`pointing` must be numeric ({e})") from e
+        mask = np.asarray(z["mask"])
+        if mask.dtype != bool:
+            raise ValueError(f"{path}: `mask` must be boolean, got {mask.dtype}")
+        d = float(z["d"]) if "d" in z.files else 1.0
+        subjects = tuple(str(s) for s in np.atleast_1d(z["subjects"]))
+    return _build(path, subjects, quat, pointing, mask, d)
+
+
+def _build(path, subjects, quat, pointing, mask, d):
+    try:
+        return DondersRecording(subjects, quat, pointing, mask, d)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from e
+
+
+def _read_csv(path):
+    with open(path, newline="") as f:
+        text = f.read()
+    d = 1.0
+    lines = []
+    for ln, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            body = s.lstrip("#").strip()
+            if body.startswith("d="):
+                try:
+                    d = float(body[2:])
+                except ValueError as e:
+                    raise ValueError(
+                        f"{path}:{ln}: bad distance comment {s!r} (expected '# d=<metres>')"
+                    ) from e
+            continue
+        lines.append((ln, line))
+    if not lines:
+        raise ValueError(f"{path}: empty file (no header, no samples)")
+    rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines))))
+    header = [h.strip().lower() for h in rows[0]]
+    if len(set(header)) != len(header):
+        raise ValueError(f"{path}:{lines[0][0]}: duplicate column names in header {header}")
+    col = {h: i for i, h in enumerate(header)}
+    has_q = all(c in col for c in _QUAT_COLS)
+    has_j = all(c in col for c in _JOINT_COLS)
+    need = ["subject", "sample", "x1", "x2"]
+    missing = [c for c in need if c not in col]
+    if missing or not (has_q or has_j):
+        raise ValueError(
+            f"{path}:{lines[0][0]}: header {header} lacks column(s) "
+            f"{missing + ([] if has_q or has_j else ['qw,qx,qy,qz or q_ps,q_fe,q_rud'])}"
+        )
+    if len(rows) == 1:
+        raise ValueError(f"{path}: header only, no samples")
+    ori_cols = _QUAT_COLS if has_q else _JOINT_COLS
+    data: dict[str, dict[int, tuple]] = {}
+    for (ln, _), row in zip(lines[1:], rows[1:]):
+        if len(row) != len(header):
+            raise ValueError(f"{path}:{ln}: expected {len(header)} fields, got {len(row)}")
+        name = row[col["subject"]].strip()
+        if not name:
+            raise ValueError(f"{path}:{ln}: empty subject name")
+        try:
+            sample = int(row[col["sample"]])
+        except ValueError as e:
+            raise ValueError(f"{path}:{ln}: `sample` must be an integer, got {row[col['sample']]!r}") from e
+        try:
+            ori = [float(row[col[c]]) for c in ori_cols]
+            x = [float(row[col[c]]) for c in ("x1", "x2")]
+        except ValueError as e:
+            raise ValueError(f"{path}:{ln}: non-numeric value ({e})") from e
+        if not np.all(np.isfinite(ori + x)):
+            raise ValueError(f"{path}:{ln}: NaN or inf in orientation/pointing columns")
+        if sample in data.setdefault(name, {}):
+            raise ValueError(f"{path}:{ln}: duplicate sample {sample} for subject {name!r}")
+        data[name][sample] = (ori, x)
+    subjects = tuple(data)
+    N = max(len(v) for v in data.values())
+    ori = np.zeros((len(subjects), N, len(ori_cols)))
+    pointing = np.zeros((len(subjects), N, 2))
+    mask = np.zeros((len(subjects), N), bool)
+    for s, name in enumerate(subjects):
+        for i, k in enumerate(sorted(data[name])):
+            ori[s, i], pointing[s, i] = data[name][k]
+            mask[s, i] = True
+    if not has_q:
+        ori = np.where(mask[..., None], np.asarray(quat_from_joint_angles(ori)), 0.0)
+    return _build(path, subjects, ori, pointing, mask, d)

@@ -1,0 +1,156 @@
+"""``MjcfChain``: a kinematic chain whose ``fk`` is a MuJoCo site position from MJX kinematics.
+
+It lets the λ0-PMP (``pmpjax.simulate``) plan joint trajectories for any MJCF model with hinge
+and slide joints, e.g. set-point trajectories for the springy arm (``pmpjax.load_arm``). The
+Jacobian is ``jax.jacfwd`` of ``mjx.kinematics``; the MJX model is a pytree leaf container, so
+the chain can be passed through ``jax.jit`` like the other chains.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from ._kinematics import Chain
+from ._pytree import pytree_dataclass, static_field
+
+
+def _mj_model(xml_or_model) -> mujoco.MjModel:
+    from ._arm import CogArm, _as_mj_model
+
+    if isinstance(xml_or_model, CogArm):
+        return xml_or_model.mj_model
+    return _as_mj_model(xml_or_model)
+
+
+def kinematics(mx, q):
+    """MJX forward kinematics at joint positions ``q`` (nq,): an ``mjx.Data`` with ``xpos``,
+    ``xipos``, ``site_xpos`` etc. filled in."""
+    with jax.numpy_rank_promotion("allow"):
+        d = mjx.make_data(mx).replace(qpos=q)
+        return mjx.kinematics(mx, d)
+
+
+def gravity_potential(mx, q):
+    """Gravitational potential energy ``V(q) = −Σ_b m_b gᵀ c_b(q)`` [J] (scalar), with ``c_b`` the
+    bodies' centres of mass."""
+    d = kinematics(mx, q)
+    return -jnp.sum(mx.body_mass * (d.xipos @ mx.opt.gravity))
+
+
+def gravity_gradient(mx, q):
+    """``∇V(q)`` (nv,) [Nm]: the gravity part of MuJoCo's ``qfrc_bias`` (hinge/slide joints).
+
+    Closed form from MJX kinematics and subtree centres of mass (no autodiff, so cheap to
+    compile and differentiate): for a hinge j with world axis ``a_j`` at anchor ``p_j`` carrying
+    subtree mass ``M_j`` with centre ``C_j``, ``∂V/∂q_j = −gᵀ (a_j × M_j (C_j − p_j))``; for a
+    slide, ``−M_j gᵀ a_j``.
+    """
+    with jax.numpy_rank_promotion("allow"):
+        d = kinematics(mx, q)
+        mass = _subtree_mask(mx) * mx.body_mass[None, :]
+        M = jnp.sum(mass, axis=1)[:, None]
+        arm = mass @ d.xipos - M * d.xanchor  # M_j (C_j − p_j)
+        lever = jnp.where(_is_hinge(mx), jnp.cross(d.xaxis, arm), M * d.xaxis)
+        return -(lever @ mx.opt.gravity)
+
+
+def _subtree_mask(mx) -> np.ndarray:
+    """(njnt, nbody) 0/1: body b lies in the subtree moved by joint j (static, from the tree)."""
+    body, parent = np.asarray(mx.jnt_bodyid), np.asarray(mx.body_parentid)
+    inside = np.zeros((body.size, parent.size))
+    for j, bj in enumerate(body):
+        for b in range(parent.size):
+            a = b
+            while a > bj:
+                a = parent[a]
+            inside[j, b] = float(a == bj)
+    return inside
+
+
+def _is_hinge(mx) -> np.ndarray:
+    return np.asarray(mx.jnt_type)[:, None] == int(mujoco.mjtJoint.mjJNT_HINGE)
+
+
+def site_jacobian(mx, site_id: int, q):
+    """Site position ``x`` (3,) and translational Jacobian ``J`` (3, nv) at ``q`` from one MJX
+    kinematics pass (as ``mj_jacSite``): column j is ``a_j × (x − p_j)`` for a hinge moving the
+    site, ``a_j`` for a slide, 0 otherwise."""
+    with jax.numpy_rank_promotion("allow"):
+        d = kinematics(mx, q)
+        x = d.site_xpos[site_id]
+        moves = _subtree_mask(mx)[:, int(np.asarray(mx.site_bodyid)[site_id])][:, None]
+        cols = jnp.where(_is_hinge(mx), jnp.cross(d.xaxis, x[None, :] - d.xanchor), d.xaxis)
+        return x, (moves * cols).T
+
+
+@pytree_dataclass
+class MjcfChain(Chain):
+    """Hand/site position ``x`` (3,) [m] of a MuJoCo model, ``q`` (nq,) joint positions.
+
+    ``MjcfChain(xml_or_model, site)``: ``xml_or_model`` a path, MJCF string, ``mujoco.MjModel``
+    or :class:`CogArm`; ``site`` the site name. Only hinge and slide joints (``nq == nv``).
+    ``reachable`` accepts points closer to the first joint than 0.99 × the summed link offsets.
+    """
+
+    mjx_model: Any
+    site_id: int = static_field(default=0)
+    n: int = static_field(default=0)
+    m: int = static_field(default=3)
+    center: tuple = static_field(default=(0.0, 0.0, 0.0))
+    reach: float = static_field(default=np.inf)
+
+    def __init__(self, xml_or_model, site: str):
+        m = _mj_model(xml_or_model)
+        if not isinstance(site, str):
+            raise TypeError(f"`site` must be a site name (str), got {type(site).__name__}")
+        sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)
+        if sid < 0:
+            names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) for i in range(m.nsite)]
+            raise ValueError(f"`site` '{site}' is not a site of the model; sites: {names}")
+        if m.nq != m.nv or m.nq == 0:
+            raise ValueError("`xml_or_model` must have only hinge/slide joints (nq == nv > 0)")
+        # Reach: summed offsets from the outermost jointed body (its first joint) out to the site.
+        path, b = [], int(m.site_bodyid[sid])
+        while b > 0:
+            path.append(b)
+            b = int(m.body_parentid[b])
+        jointed = [b for b in path if m.body_jntnum[b] > 0]
+        if not jointed:
+            raise ValueError(f"`site` '{site}' is not moved by any joint")
+        root = jointed[-1]
+        reach = float(np.linalg.norm(m.site_pos[sid])) + float(np.linalg.norm(m.jnt_pos[m.body_jntadr[root]]))
+        reach += sum(float(np.linalg.norm(m.body_pos[b])) for b in path[: path.index(root)])
+        d = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d)
+        center = d.xanchor[m.body_jntadr[root]]
+        with jax.numpy_rank_promotion("allow"):
+            mx = mjx.put_model(m)
+        object.__setattr__(self, "mjx_model", mx)
+        object.__setattr__(self, "site_id", int(sid))
+        object.__setattr__(self, "n", int(m.nq))
+        object.__setattr__(self, "m", 3)
+        object.__setattr__(self, "center", tuple(float(v) for v in center))
+        object.__setattr__(self, "reach", float(reach))
+
+    def site_position(self, q):
+        """Site position (3,) for one posture ``q`` (n,)."""
+        return kinematics(self.mjx_model, q).site_xpos[self.site_id]
+
+    def fk_jac_soa(self, qc):
+        flat = qc.reshape(self.n, -1).T
+        x, J = jax.vmap(lambda q: site_jacobian(self.mjx_model, self.site_id, q))(flat)
+        batch = qc.shape[1:]
+        return x.T.reshape((3,) + batch), jnp.moveaxis(J, 0, -1).reshape((3, self.n) + batch)
+
+    def reachable(self, x):
+        r = np.linalg.norm(np.asarray(x, dtype=float) - np.asarray(self.center), axis=-1)
+        return r <= 0.99 * self.reach
+
+    def workspace_description(self):
+        return f"|x - {np.round(self.center, 3).tolist()}| <= {0.99 * self.reach:.3g} m"

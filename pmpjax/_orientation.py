@@ -1,0 +1,157 @@
+"""Wrist orientations: rotation matrices (Eq 6), quaternions, rotation vectors, and back to joints.
+
+Conventions (all functions take leading batch axes and are differentiable):
+
+- Quaternions are **scalar-first** ``(w, x, y, z)``, unit norm, sign chosen with ``w >= 0``
+  (SciPy's ``Rotation.as_quat`` is scalar-last: reorder with ``quat[..., [3, 0, 1, 2]]``).
+- Rotation vectors are axis·angle ``r = θ n`` [rad], ``θ ∈ [0, π]``, ``R = exp(r̂)``
+  (``convention="rodrigues"`` gives Haslwanter's ``tan(θ/2) n`` instead).
+- ``R`` maps hand-frame to world-frame coordinates; the hand points along ``R e_x``.
+- Joint angles ``q = (q_PS, q_FE, q_RUD)`` with ``R(q) = Rx(−q_PS) Rz(q_FE) Ry(q_RUD)`` (Eq 6).
+  The inverse picks the branch ``|q_FE| < π/2`` (``cos q_FE > 0``) with ``q_PS, q_RUD ∈ (−π, π]``;
+  every orientation with ``R[0, 1] ≠ ±1`` has exactly one such triple. The other branch
+  ``(q_PS + π, π − q_FE, q_RUD + π)`` gives the same ``R`` and is never returned.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ._kinematics import Wrist
+
+_WRIST = Wrist()
+
+
+def wrist_rotation(q):
+    """Hand orientation ``R(q)`` (..., 3, 3) of wrist joint angles ``q`` (..., 3) [rad] (Eq 6)."""
+    return _WRIST.rotation(jnp.asarray(q))
+
+
+def _hat(r):
+    z = jnp.zeros_like(r[..., 0])
+    x, y, w = r[..., 0], r[..., 1], r[..., 2]
+    return jnp.stack([jnp.stack([z, -w, y], -1), jnp.stack([w, z, -x], -1), jnp.stack([-y, x, z], -1)], -2)
+
+
+def quat_from_matrix(R):
+    """Unit quaternion ``(w, x, y, z)`` (..., 4), ``w >= 0``, of rotation matrices ``R`` (..., 3, 3).
+
+    Shepperd's method: the largest of ``(w², x², y², z²)`` is computed from the diagonal and the
+    others from off-diagonal sums, so the result is accurate for every rotation.
+    """
+    R = jnp.asarray(R)
+    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    tr = m00 + m11 + m22
+    d = jnp.stack([tr, m00 - m11 - m22, -m00 + m11 - m22, -m00 - m11 + m22], -1)
+    k = jnp.argmax(d, axis=-1)
+    s21, s12 = R[..., 2, 1], R[..., 1, 2]
+    s02, s20 = R[..., 0, 2], R[..., 2, 0]
+    s10, s01 = R[..., 1, 0], R[..., 0, 1]
+    # 4·(largest component) times each component, for each choice of the largest.
+    cands = jnp.stack(
+        [
+            jnp.stack([1 + tr, s21 - s12, s02 - s20, s10 - s01], -1),
+            jnp.stack([s21 - s12, 1 + m00 - m11 - m22, s01 + s10, s02 + s20], -1),
+            jnp.stack([s02 - s20, s01 + s10, 1 - m00 + m11 - m22, s12 + s21], -1),
+            jnp.stack([s10 - s01, s02 + s20, s12 + s21, 1 - m00 - m11 + m22], -1),
+        ],
+        -2,
+    )
+    v = jnp.take_along_axis(cands, k[..., None, None], axis=-2)[..., 0, :]
+    v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
+    return jnp.where(v[..., :1] < 0, -v, v)
+
+
+def matrix_from_quat(quat):
+    """Rotation matrix (..., 3, 3) of quaternions ``(w, x, y, z)`` (..., 4) (normalised first)."""
+    quat = jnp.asarray(quat)
+    quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
+    w, x, y, z = (quat[..., i] for i in range(4))
+    return jnp.stack(
+        [
+            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
+    """Rotation vector (..., 3) of quaternions (..., 4); ``convention`` "axis_angle" (θ n, rad)
+    or "rodrigues" (tan(θ/2) n)."""
+    quat = jnp.asarray(quat)
+    quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
+    quat = jnp.where(quat[..., :1] < 0, -quat, quat)
+    w, v = quat[..., 0], quat[..., 1:]
+    if convention == "rodrigues":
+        return v / w[..., None]
+    if convention != "axis_angle":
+        raise ValueError(f"`convention` must be 'axis_angle' or 'rodrigues', got {convention!r}")
+    s2 = jnp.sum(v * v, axis=-1)
+    small = s2 < 1e-12
+    s = jnp.sqrt(jnp.where(small, 1.0, s2))
+    # r = θ v / |v| with θ = 2 atan2(|v|, w); series 2/w − 2|v|²/(3w³) near 0 keeps it smooth.
+    factor = jnp.where(small, 2.0 / w - 2.0 * s2 / (3.0 * w**3), 2.0 * jnp.arctan2(s, w) / s)
+    return factor[..., None] * v
+
+
+def quat_from_rotvec(r):
+    """Quaternion ``(w, x, y, z)`` (..., 4) of axis·angle rotation vectors ``r`` (..., 3) [rad]."""
+    r = jnp.asarray(r)
+    t2 = jnp.sum(r * r, axis=-1)
+    small = t2 < 1e-8
+    t = jnp.sqrt(jnp.where(small, 1.0, t2))
+    half_sinc = jnp.where(small, 0.5 - t2 / 48.0, jnp.sin(0.5 * t) / t)
+    w = jnp.where(small, 1.0 - t2 / 8.0, jnp.cos(0.5 * t))
+    q = jnp.concatenate([w[..., None], half_sinc[..., None] * r], -1)
+    return jnp.where(q[..., :1] < 0, -q, q)
+
+
+def rotvec_from_matrix(R, *, convention: str = "axis_angle"):
+    """Rotation vector (..., 3) of rotation matrices (..., 3, 3) (see :func:`rotvec_from_quat`)."""
+    return rotvec_from_quat(quat_from_matrix(R), convention=convention)
+
+
+def matrix_from_rotvec(r):
+    """Rotation matrix ``exp(r̂)`` (..., 3, 3) of rotation vectors ``r`` (..., 3) [rad]."""
+    return matrix_from_quat(quat_from_rotvec(r))
+
+
+def joint_angles_from_matrix(R):
+    """Wrist joint angles ``(q_PS, q_FE, q_RUD)`` (..., 3) [rad] with ``R(q) = R`` (inverse of Eq 6).
+
+    From ``R = Rx(−a) Rz(b) Ry(c)``: ``R[0,1] = −sin b``, ``(R[0,0], R[0,2]) = cos b (cos c, sin c)``,
+    ``(R[1,1], R[2,1]) = cos b (cos a, −sin a)``. Branch ``|q_FE| < π/2``; undefined at gimbal lock
+    ``|q_FE| = π/2`` (the wrist points along the screen, outside every reachable target).
+    """
+    R = jnp.asarray(R)
+    b = jnp.arctan2(-R[..., 0, 1], jnp.hypot(R[..., 0, 0], R[..., 0, 2]))
+    c = jnp.arctan2(R[..., 0, 2], R[..., 0, 0])
+    a = jnp.arctan2(-R[..., 2, 1], R[..., 1, 1])
+    return jnp.stack([a, b, c], -1)
+
+
+def joint_angles_from_quat(quat):
+    """Wrist joint angles (..., 3) [rad] of quaternions ``(w, x, y, z)`` (..., 4)."""
+    return joint_angles_from_matrix(matrix_from_quat(quat))
+
+
+def quat_from_joint_angles(q):
+    """Quaternion ``(w, x, y, z)`` (..., 4) of wrist joint angles ``q`` (..., 3) [rad]."""
+    return quat_from_matrix(wrist_rotation(q))
+
+
+def rotvec_from_joint_angles(q, *, convention: str = "axis_angle"):
+    """Rotation vector ``r`` (..., 3) of the wrist posture ``q`` (..., 3) [rad] (design §3.4)."""
+    return rotvec_from_matrix(wrist_rotation(q), convention=convention)
+
+
+def torsion_between(R_ref, R):
+    """Signed angle [rad] of ``R_refᵀ R`` about the hand's pointing axis ``e_x`` (...,).
+
+    For two postures pointing the same way, ``R_refᵀ R`` is a pure rotation about ``e_x`` and this
+    is exactly its angle; otherwise it is the torsional component ``atan2(M21 − M12, M11 + M22)``.
+    """
+    M = jnp.swapaxes(jnp.asarray(R_ref), -1, -2) @ jnp.asarray(R)
+    return jnp.arctan2(M[..., 2, 1] - M[..., 1, 2], M[..., 1, 1] + M[..., 2, 2])

@@ -1,0 +1,59 @@
+"""Subject parameters of Tommasino & Campolo (2017), Tables 1–2, shipped as package data.
+
+``KJ`` is rebuilt symmetric from the six printed entries (K11 K12 K13 K22 K23 K33; 1 = PS,
+2 = FE, 3 = RUD). The printed traces are 3.99–4.00 because of two-decimal rounding; by default
+``KJ`` is rescaled to trace exactly 4 Nm/rad (a change of at most 0.25 %, which leaves the
+eigenvalue ratios — all that shapes Donders' law — untouched and matches the NIO fit's
+parameterisation). ``normalize=False`` returns the table as printed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from functools import cache
+from importlib import resources
+
+import numpy as np
+
+_FILE = "tommasino2017_tables.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class Subject:
+    """``name``; ``KJ`` (3, 3) SPD stiffness [Nm/rad]; ``q_rest`` (3,) rest posture [rad] (PS, FE, RUD)."""
+
+    name: str
+    KJ: np.ndarray
+    q_rest: np.ndarray
+
+
+@cache
+def _table() -> dict:
+    return json.loads(resources.files("pmpjax").joinpath("data", _FILE).read_text())
+
+
+def subject_names() -> tuple[str, ...]:
+    """Names of the tabulated subjects: ``("subj1", ..., "subj6")``."""
+    return tuple(_table()["subjects"])
+
+
+def load_subject(name: str, *, normalize: bool = True) -> Subject:
+    """One subject of Tables 1–2 by name (``"subj1"`` … ``"subj6"``; ``"Subj 1"`` and ``1`` also work)."""
+    key = str(name).lower().replace(" ", "")
+    if key.isdigit():
+        key = f"subj{key}"
+    subjects = _table()["subjects"]
+    if key not in subjects:
+        raise ValueError(f"unknown subject {name!r}; available: {', '.join(subjects)}")
+    k11, k12, k13, k22, k23, k33 = subjects[key]["KJ"]
+    KJ = np.array([[k11, k12, k13], [k12, k22, k23], [k13, k23, k33]], dtype=float)
+    if normalize:
+        KJ = KJ * (4.0 / np.trace(KJ))
+    return Subject(key, KJ, np.array(subjects[key]["q_rest"], dtype=float))
+
+
+def paper_subjects(*, normalize: bool = True) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """All six subjects stacked: ``(names, KJ (6, 3, 3), q_rest (6, 3))``."""
+    subs = [load_subject(n, normalize=normalize) for n in subject_names()]
+    return [s.name for s in subs], np.stack([s.KJ for s in subs]), np.stack([s.q_rest for s in subs])

@@ -1,0 +1,333 @@
+"""Orientations, Donders surfaces, Donders recordings (files) and the batched NIO fit."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.spatial.transform import Rotation
+
+import fitting
+import pmpjax as pj
+
+# --- orientations ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def q_data():
+    """Wrist postures over (beyond) the data range of the Donders experiments."""
+    rng = np.random.default_rng(1)
+    return rng.uniform([-1.2, -1.0, -1.0], [1.2, 1.0, 1.0], size=(300, 3))
+
+
+def test_wrist_rotation_matches_scipy_euler(q_data):
+    # Eq 6: R = Rx(−q_PS) Rz(q_FE) Ry(q_RUD) = intrinsic X-Z-Y Euler angles (−q_PS, q_FE, q_RUD)
+    ref = Rotation.from_euler("XZY", q_data * [-1, 1, 1]).as_matrix()
+    np.testing.assert_allclose(np.asarray(pj.wrist_rotation(q_data)), ref, atol=1e-14)
+
+
+def test_quaternion_and_rotvec_conventions_match_scipy(q_data):
+    R = np.asarray(pj.wrist_rotation(q_data))
+    quat = np.asarray(pj.quat_from_matrix(R))
+    ref = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]  # SciPy is scalar-last
+    ref *= np.sign(ref[:, :1])
+    np.testing.assert_allclose(quat, ref, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(pj.matrix_from_quat(quat)), R, atol=1e-14)
+    rv = np.asarray(pj.rotvec_from_matrix(R))
+    np.testing.assert_allclose(rv, Rotation.from_matrix(R).as_rotvec(), atol=1e-13)
+    np.testing.assert_allclose(np.asarray(pj.matrix_from_rotvec(rv)), R, atol=1e-13)
+    rod = np.asarray(pj.rotvec_from_quat(quat, convention="rodrigues"))
+    np.testing.assert_allclose(rod, ref[:, 1:] / ref[:, :1], atol=1e-13)
+
+
+def test_joint_angle_round_trip_over_data_range(q_data):
+    quat = pj.quat_from_joint_angles(q_data)
+    np.testing.assert_allclose(np.asarray(pj.joint_angles_from_quat(quat)), q_data, atol=1e-12)
+
+
+def test_inverse_returns_branch_with_small_fe():
+    # the other branch (q_PS + π, π − q_FE, q_RUD + π) has |q_FE| > π/2 and the same R
+    q = np.array([[0.3, 0.4, -0.2], [-0.5, -0.7, 0.9]])
+    other = np.stack([q[:, 0] + np.pi, np.pi - q[:, 1], q[:, 2] + np.pi], -1)
+    np.testing.assert_allclose(
+        np.asarray(pj.wrist_rotation(other)), np.asarray(pj.wrist_rotation(q)), atol=1e-14
+    )
+    back = np.asarray(pj.joint_angles_from_matrix(pj.wrist_rotation(other)))
+    np.testing.assert_allclose(back, q, atol=1e-12)
+    assert np.all(np.abs(back[:, 1]) < np.pi / 2)
+
+
+def test_rotvec_gradient_smooth_through_identity():
+    f = lambda r: jnp.sum(pj.rotvec_from_quat(pj.quat_from_rotvec(r)) ** 2)  # noqa: E731
+    for r0 in (np.zeros(3), np.array([1e-9, -2e-9, 0.0]), np.array([0.3, -0.2, 0.1])):
+        np.testing.assert_allclose(np.asarray(jax.grad(f)(jnp.asarray(r0))), 2 * r0, atol=1e-12)
+
+
+# --- Donders surfaces ----------------------------------------------------------------------
+
+C_TRUE = np.array([0.05, 0.2, -0.1, 0.3, -0.5, 0.15])
+
+
+def _samples(rng, n):
+    ry, rz = rng.uniform(-0.35, 0.35, (2, n))
+    A = np.stack([np.ones(n), ry, rz, ry**2, ry * rz, rz**2], -1)
+    return ry, rz, A
+
+
+def test_surface_fit_exact_on_noiseless_samples():
+    ry, rz, A = _samples(np.random.default_rng(2), 50)
+    r = np.stack([A @ C_TRUE, ry, rz], -1)
+    s = pj.fit_donders_surface(r)
+    np.testing.assert_allclose(np.asarray(s.coef), C_TRUE, atol=1e-13)
+    assert float(s.thickness) < 1e-13
+    np.testing.assert_allclose(np.asarray(s(ry, rz)), A @ C_TRUE, atol=1e-13)
+
+
+def test_surface_fit_noisy_within_standard_errors_and_matches_numpy():
+    rng = np.random.default_rng(3)
+    ry, rz, A = _samples(rng, 400)
+    sig = np.deg2rad(0.5)
+    rx = A @ C_TRUE + rng.normal(scale=sig, size=400)
+    s = pj.fit_donders_surface(np.stack([rx, ry, rz], -1))
+    coef, ssr = np.linalg.lstsq(A, rx, rcond=None)[:2]
+    se = np.sqrt(ssr[0] / (400 - 6) * np.diag(np.linalg.inv(A.T @ A)))
+    np.testing.assert_allclose(np.asarray(s.coef), coef, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(s.stderr), se, rtol=1e-9)
+    assert np.all(np.abs(np.asarray(s.coef) - C_TRUE) < 3 * se)
+    np.testing.assert_allclose(float(s.thickness), np.sqrt(ssr[0] / 400), rtol=1e-10)
+
+
+def test_surface_fit_mask_equals_subset():
+    rng = np.random.default_rng(4)
+    ry, rz, A = _samples(rng, 60)
+    r = np.stack([A @ C_TRUE + rng.normal(scale=0.01, size=60), ry, rz], -1)
+    mask = np.arange(60) < 40
+    a, b = pj.fit_donders_surface(r, mask=mask), pj.fit_donders_surface(r[:40])
+    np.testing.assert_allclose(np.asarray(a.coef), np.asarray(b.coef), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(a.stderr), np.asarray(b.stderr), rtol=1e-9)
+    with pytest.raises(ValueError, match="at least 7"):
+        pj.fit_donders_surface(r[:5])
+    with pytest.raises(ValueError, match="r.*NaN"):
+        pj.fit_donders_surface(np.where(np.arange(60)[:, None] == 3, np.nan, r))
+
+
+def test_model_surface_and_plot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    _, K, q = pj.paper_subjects()
+    surf, r, qe = pj.model_donders_surface(K, q, pj.screen_grid(7))
+    assert r.shape == (6, 49, 3) and surf.coef.shape == (6, 6)
+    # independent: rotation vectors of the equilibria by SciPy
+    ref = (
+        Rotation.from_matrix(np.asarray(pj.wrist_rotation(qe)).reshape(-1, 3, 3))
+        .as_rotvec()
+        .reshape(6, 49, 3)
+    )
+    np.testing.assert_allclose(np.asarray(r), ref, atol=1e-12)
+    ax = pj.plot_donders(r[0], [surf.coef[0], surf.coef[1]], labels=["subj1", "subj2"])
+    assert len(ax.collections) == 3
+
+
+# --- subjects and recordings -----------------------------------------------------------------
+
+
+def test_paper_subjects_table():
+    names, K, q = pj.paper_subjects(normalize=False)
+    assert names == ["subj1", "subj2", "subj3", "subj4", "subj5", "subj6"]
+    np.testing.assert_allclose(K[0], [[1.22, 0.07, 0.08], [0.07, 1.68, 0.03], [0.08, 0.03, 1.09]])
+    np.testing.assert_allclose(q[3], [0.36, 0.25, -0.09])
+    s = pj.load_subject("Subj 4")
+    np.testing.assert_allclose(np.trace(s.KJ), 4.0)
+    np.testing.assert_allclose(s.KJ / K[3], 4.0 / np.trace(K[3]))
+    assert np.all(np.linalg.eigvalsh(K) > 0)
+    with pytest.raises(ValueError, match="unknown subject"):
+        pj.load_subject("subj9")
+
+
+@pytest.fixture(scope="module")
+def small_recording():
+    _, K, q = pj.paper_subjects()
+    return pj.synthetic_recordings(K[:2], q[:2], 40, noise_deg=0.5, seed=5)
+
+
+def test_synthetic_noise_and_consistency(small_recording):
+    rec = small_recording
+    _, K, q = pj.paper_subjects()
+    clean = pj.synthetic_recordings(K[:2], q[:2], 40, noise_deg=0.0, seed=5)
+    Rn, Rc = (Rotation.from_quat(np.asarray(r.quat)[..., [1, 2, 3, 0]].reshape(-1, 4)) for r in (rec, clean))
+    ang = np.rad2deg((Rc.inv() * Rn).magnitude())
+    assert 0.4 < np.sqrt(np.mean(ang**2)) < 0.6
+    # pointing is what the (noisy) orientation points at (Eq 6)
+    np.testing.assert_allclose(np.asarray(pj.Wrist().fk(rec.joint_angles)), rec.pointing, atol=1e-12)
+    # clean postures are equilibria (SciPy-free check: λ0-PMP stationarity K(q − q_rest) ∈ range Jᵀ)
+    qc = clean.joint_angles[0]
+    J = np.asarray(pj.Wrist().jacobian(qc))
+    g = (K[0] @ (qc - q[0]).T).T
+    lam = np.linalg.lstsq(J[0].T, g[0], rcond=None)[0]
+    np.testing.assert_allclose(J[0].T @ lam, g[0], atol=1e-12)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_file_round_trip(small_recording, tmp_path, suffix):
+    path = tmp_path / f"rec{suffix}"
+    pj.write_recordings(path, small_recording)
+    back = pj.read_recordings(path)
+    assert back.subjects == small_recording.subjects
+    np.testing.assert_array_equal(back.quat, small_recording.quat)
+    np.testing.assert_array_equal(back.pointing, small_recording.pointing)
+
+
+def test_csv_with_joint_angles_only_and_ragged(small_recording, tmp_path):
+    rec = small_recording
+    q = rec.joint_angles
+    lines = ["subject,sample,q_ps,q_fe,q_rud,x1,x2"]
+    for s in range(2):
+        for i in range(40 - 10 * s):
+            vals = [float(v) for v in (*q[s, i], *rec.pointing[s, i])]
+            lines.append(",".join([rec.subjects[s], str(i)] + [repr(v) for v in vals]))
+    path = tmp_path / "joints.csv"
+    path.write_text("\n".join(lines) + "\n")
+    back = pj.read_recordings(path)
+    np.testing.assert_array_equal(back.n_samples, [40, 30])
+    np.testing.assert_allclose(back.joint_angles[1, :30], q[1, :30], atol=1e-12)
+
+
+BAD_CSV = {
+    "empty": ("", "empty file"),
+    "header only": ("subject,sample,qw,qx,qy,qz,x1,x2\n", "no samples"),
+    "missing column": ("subject,sample,qw,qx,qy,x1,x2\ns,0,1,0,0,0,0\n", "lacks column"),
+    "non-numeric": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,zero,0,0,0\n", "non-numeric"),
+    "nan": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0,nan,0\n", "NaN"),
+    "short row": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0\n", "expected 8 fields"),
+    "duplicate": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0,0,0\ns,0,1,0,0,0,0,0\n", "duplicate sample"),
+    "not unit": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,2,0,0,0,0,0\n", "unit quaternions"),
+    "unreachable": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0,0.995,0\n", "reachable"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_CSV))
+def test_bad_csv(tmp_path, case):
+    text, match = BAD_CSV[case]
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        pj.read_recordings(path)
+
+
+def test_bad_npz_and_paths(tmp_path, small_recording):
+    p = tmp_path / "bad.npz"
+    p.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a readable"):
+        pj.read_recordings(p)
+    np.savez(tmp_path / "miss.npz", quat=small_recording.quat)
+    with pytest.raises(ValueError, match="missing array"):
+        pj.read_recordings(tmp_path / "miss.npz")
+    np.savez(
+        tmp_path / "empty.npz",
+        subjects=np.array(["a"]),
+        quat=np.zeros((1, 0, 4)),
+        pointing=np.zeros((1, 0, 2)),
+        mask=np.zeros((1, 0), bool),
+    )
+    with pytest.raises(ValueError, match="N > 0"):
+        pj.read_recordings(tmp_path / "empty.npz")
+    with pytest.raises(ValueError, match="no such file"):
+        pj.read_recordings(tmp_path / "nope.csv")
+    with pytest.raises(ValueError, match=r"\.csv or \.npz"):
+        pj.write_recordings(tmp_path / "x.txt", small_recording)
+
+
+# --- NIO fit ---------------------------------------------------------------------------------
+
+
+def test_stiffness_parameterisation():
+    rng = np.random.default_rng(6)
+    s = rng.normal(scale=0.4, size=5)
+    K = np.asarray(fitting.stiffness_from_params(jnp.asarray(s), 3))
+    S = np.zeros((3, 3))
+    for k, (i, j) in enumerate([(0, 0), (1, 1), (0, 1), (0, 2), (1, 2)]):
+        S[i, j] = S[j, i] = s[k]
+    S[2, 2] = -s[0] - s[1]
+    E = scipy.linalg.expm(S)
+    np.testing.assert_allclose(K, 4 * E / np.trace(E), atol=1e-14)
+    np.testing.assert_allclose(fitting.params_from_stiffness(K), s, atol=1e-12)
+    _, Ks, _ = pj.paper_subjects()
+    np.testing.assert_allclose(
+        np.asarray(
+            jax.vmap(lambda p: fitting.stiffness_from_params(p, 3))(
+                jnp.asarray(fitting.params_from_stiffness(Ks))
+            )
+        ),
+        Ks,
+        atol=1e-13,
+    )
+
+
+N_FIT = 500
+LOW_NOISE = 0.01  # deg: the regime where the Gauss–Newton (linearised) standard errors are accurate
+
+
+@pytest.fixture(scope="module")
+def nio():
+    """One batched call: the six Table subjects (0.5° noise), two at low noise, one failing."""
+    names, K, q = pj.paper_subjects()
+    idx = [0, 1, 2, 3, 4, 5, 0, 3]
+    rec = pj.synthetic_recordings(K[idx], q[idx], N_FIT, noise_deg=[0.5] * 6 + [LOW_NOISE] * 2, seed=11)
+    pointing = np.concatenate([rec.pointing, rec.pointing[:1]])
+    postures = np.concatenate([rec.joint_angles, rec.joint_angles[:1]])
+    mask = np.ones(pointing.shape[:2], bool)
+    mask[-1, 5:] = False  # subject 9: 5 samples < 8 parameters -> cannot be fitted
+    res = fitting.fit_donders(pj.Wrist(), pointing, postures, mask=mask, n_starts=2, seed=0)
+    truth = np.concatenate([fitting.params_from_stiffness(K), q], -1)
+    return res, np.concatenate([truth, truth[[0, 3]], truth[:1]]), K, q
+
+
+def test_nio_converges_and_flags_failing_subject(nio):
+    res, _, _, _ = nio
+    assert res.KJ.shape == (9, 3, 3) and res.start_loss.shape == (9, 2)
+    assert np.all(res.converged[:8]) and np.all(res.status[:8] == 0)
+    assert not res.converged[8] and res.status[8] == 3
+    np.testing.assert_allclose(np.trace(res.KJ, axis1=1, axis2=2), 4.0, rtol=1e-12)
+    assert np.all(np.linalg.eigvalsh(res.KJ) > 0)
+    # residual RMS ≈ torsional share of 0.5° isotropic noise (0.5/√3 = 0.29°)
+    assert np.all(np.abs(np.rad2deg(res.rms[:6]) - 0.5 / np.sqrt(3)) < 0.05)
+    assert "UNIDENTIFIABLE" in res.report(0) or res.identifiable[0].all()
+
+
+def test_nio_predicts_held_out_torsion(nio):
+    res, _, K, q = nio
+    grid = pj.screen_grid(7) * 0.97  # held-out positions (not sampled points)
+    t_fit = np.asarray(fitting.predicted_torsion(pj.Wrist(), res.KJ[:6], res.q_rest[:6], grid))
+    t_true = np.asarray(fitting.predicted_torsion(pj.Wrist(), K, q, grid))
+    rms = np.rad2deg(np.sqrt(np.mean((t_fit - t_true) ** 2, axis=-1)))
+    assert np.all(rms < 0.25), rms
+
+
+def test_nio_parameters_within_three_standard_errors(nio):
+    res, truth, _, _ = nio
+    # Along identifiable directions (rows of `directions`), in the regime where the linearised
+    # covariance is valid (low noise; at 0.5° the weak directions' curvature biases the rest).
+    for i in (6, 7):
+        z = res.directions[i] @ (res.params[i] - truth[i]) / res.direction_stderr[i]
+        assert np.all(np.abs(z[res.identifiable[i]]) < 3), z
+
+
+def test_nio_bad_input():
+    w = pj.Wrist()
+    x = np.zeros((2, 10, 2))
+    q = np.zeros((2, 10, 3))
+    with pytest.raises(ValueError, match="postures.*NaN"):
+        fitting.fit_donders(w, x, np.where(np.arange(10)[:, None] == 2, np.nan, q))
+    with pytest.raises(ValueError, match="pointing.*reachable"):
+        fitting.fit_donders(w, np.where(np.arange(10)[:, None] == 2, 0.995, x), q)
+    with pytest.raises(ValueError, match="postures.*shape"):
+        fitting.fit_donders(w, x, np.zeros((2, 10, 2)))
+    with pytest.raises(ValueError, match="agree"):
+        fitting.fit_donders(w, x, np.zeros((2, 9, 3)))
+    with pytest.raises(ValueError, match="mask"):
+        fitting.fit_donders(w, x, q, mask=np.ones((2, 9), bool))
+    with pytest.raises(ValueError, match="residual"):
+        fitting.fit_donders(w, x, q, residual="angles")
+    with pytest.raises(TypeError, match="chain"):
+        fitting.fit_donders("wrist", x, q)

@@ -1,0 +1,170 @@
+"""Equilibrium postures (design §3.1): SciPy SLSQP, λ0-PMP steady state, implicit gradients."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+import pmpjax as pj
+
+KJ1 = np.array([[1.22, 0.07, 0.08], [0.07, 1.68, 0.03], [0.08, 0.03, 1.09]])  # Table 1, subj 1
+QR1 = np.array([0.26, -0.08, 0.13])
+TARGETS = np.array([[0.0, 0.0], [0.25, -0.1], [-0.3, 0.3], [0.1, 0.33]])
+
+
+def _fk_np(chain, q):
+    """Independent NumPy forward kinematics (complex-safe): Eq 6 from rotation matrices, or the
+    planar arm's cumulative angles."""
+    if isinstance(chain, pj.PlanarArm):
+        L, phi = np.asarray(chain.lengths), np.cumsum(q)
+        return np.array([np.sum(L * np.cos(phi)), np.sum(L * np.sin(phi))])
+    a, b, c = q
+    rx = np.array([[1, 0, 0], [0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]])  # Rx(−a)
+    rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    ry = np.array([[np.cos(c), 0, np.sin(c)], [0, 1, 0], [-np.sin(c), 0, np.cos(c)]])
+    u = (rx @ rz @ ry)[:, 0]
+    return float(chain.d) * np.array([-u[1], u[2]])
+
+
+def _slsqp(chain, K, qr, x, q0):
+    fk = lambda q: _fk_np(chain, q)  # noqa: E731
+    # complex-step Jacobian: exact to rounding, independent of pmpjax's analytic one
+    jac = lambda q: np.stack([_fk_np(chain, q + 1e-30j * e).imag / 1e-30 for e in np.eye(len(q))], -1)  # noqa: E731
+    cons = {"type": "eq", "fun": lambda q: fk(q) - x, "jac": jac}
+    r = minimize(
+        lambda q: 0.5 * (q - qr) @ K @ (q - qr),
+        q0,
+        jac=lambda q: K @ (q - qr),
+        constraints=[cons],
+        method="SLSQP",
+        options={"ftol": 1e-16, "maxiter": 500},
+    )
+    assert r.success, r.message
+    return r.x
+
+
+@pytest.fixture(scope="module")
+def wrist():
+    return pj.Wrist()
+
+
+def test_wrist_matches_slsqp(wrist):
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS, return_info=True)
+    assert eq.q.shape == (4, 3) and bool(np.all(eq.converged))
+    for x, q in zip(TARGETS, np.asarray(eq.q)):
+        ref = _slsqp(wrist, KJ1, QR1, x, QR1)
+        np.testing.assert_allclose(q, ref, atol=1e-8, rtol=0)
+    # the multiplier is the task force λ0 of Eq 4 with W = KJ (B J A τ_el)
+    J = np.asarray(wrist.jacobian(eq.q))
+    lam0 = np.asarray(pj.lambda0(J, np.broadcast_to(KJ1, (4, 3, 3)), (KJ1 @ (np.asarray(eq.q) - QR1).T).T))
+    np.testing.assert_allclose(np.asarray(eq.lam), lam0, atol=1e-12)
+
+
+def test_planar_arm_matches_slsqp():
+    arm = pj.PlanarArm([0.3, 0.25, 0.15])
+    K = np.diag([2.0, 1.0, 0.5]) + 0.1
+    qr = np.array([0.4, 0.8, 0.3])
+    xs = np.array([[0.35, 0.3], [0.1, 0.45]])
+    q = np.asarray(pj.equilibrium_posture(arm, K, qr, xs))
+    for x, qi in zip(xs, q):
+        np.testing.assert_allclose(qi, _slsqp(arm, K, qr, x, qr), atol=1e-8, rtol=0)
+
+
+def test_matches_lambda0_pmp_steady_state(wrist):
+    x = TARGETS[1:3]
+    model = pj.Lambda0PMP(wrist, KJ=KJ1, q_rest=QR1, W=pj.damping_from_stiffness(KJ1, 0.08))
+    traj = pj.simulate(
+        model,
+        pj.ConstantPlanner(k=20.0),
+        np.broadcast_to(QR1, (2, 3)),
+        x,
+        duration=4.0,
+        dt=4e-3,
+        saveat=pj.SaveAt(final=True),
+    )
+    q_sim = np.asarray(traj.q[:, -1])
+    q_eq = np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, x))
+    np.testing.assert_allclose(q_sim, q_eq, atol=1e-7)
+
+
+def test_batched_over_subjects_and_targets(wrist):
+    KJs = np.stack([KJ1, np.diag([0.5, 1.5, 2.0])])
+    qrs = np.stack([QR1, np.deg2rad([5.0, 0.0, 0.0])])
+    q = np.asarray(pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None]))
+    assert q.shape == (2, 4, 3)
+    for s in range(2):
+        for t in range(4):
+            np.testing.assert_allclose(q[s, t], _slsqp(wrist, KJs[s], qrs[s], TARGETS[t], qrs[s]), atol=1e-8)
+
+
+def _loss(K, qr, x, chain):
+    q = pj.equilibrium_posture(chain, K, qr, x)
+    return jnp.sum(jnp.sin(q) @ jnp.arange(1.0, 4.0))
+
+
+def _fd(f, x, dirs, h=1e-6):
+    return np.array([(f(x + h * d) - f(x - h * d)) / (2 * h) for d in dirs])
+
+
+@pytest.mark.parametrize("mode", ["rev", "fwd"])
+def test_gradients_match_central_differences(wrist, mode):
+    x = TARGETS[1:3]
+    diff = jax.grad if mode == "rev" else jax.jacfwd
+    gK, gq, gx = diff(_loss, argnums=(0, 1, 2))(jnp.asarray(KJ1), jnp.asarray(QR1), jnp.asarray(x), wrist)
+    f = lambda K, qr, xx: float(_loss(K, qr, xx, wrist))  # noqa: E731
+    # KJ: symmetric perturbation directions (the solver validates symmetry)
+    sym = []
+    for i in range(3):
+        for j in range(i, 3):
+            E = np.zeros((3, 3))
+            E[i, j] = E[j, i] = 1.0
+            sym.append(E)
+    fdK = _fd(lambda K: f(K, QR1, x), KJ1, sym)
+    np.testing.assert_allclose([np.sum(np.asarray(gK) * E) for E in sym], fdK, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(
+        np.asarray(gq), _fd(lambda q: f(KJ1, q, x), QR1, np.eye(3)), rtol=1e-6, atol=1e-8
+    )
+    dirs = np.eye(4).reshape(4, 2, 2)
+    np.testing.assert_allclose(
+        np.asarray(gx).reshape(-1), _fd(lambda xx: f(KJ1, QR1, xx), x, dirs), rtol=1e-6, atol=1e-8
+    )
+
+
+def test_vmap_of_grad_equals_grad_of_sum(wrist):
+    x = jnp.asarray(TARGETS[1:3])
+    g_each = jax.jit(
+        jax.vmap(lambda xx: jax.grad(_loss, argnums=1)(jnp.asarray(KJ1), jnp.asarray(QR1), xx, wrist))
+    )(x)
+    g_sum = jax.grad(_loss, argnums=1)(jnp.asarray(KJ1), jnp.asarray(QR1), x, wrist)
+    np.testing.assert_allclose(np.asarray(g_each).sum(0), np.asarray(g_sum), atol=1e-12)
+
+
+def test_not_converged_is_flagged(wrist):
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1, return_info=True)
+    assert not bool(eq.converged)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(KJ=np.diag([1.0, -1.0, 1.0])), "KJ.*positive definite"),
+        (dict(KJ=np.eye(2)), "KJ.*shape"),
+        (dict(KJ=KJ1 + np.triu(np.ones((3, 3)), 1)), "KJ.*symmetric"),
+        (dict(q_rest=np.array([np.nan, 0.0, 0.0])), "q_rest.*NaN"),
+        (dict(target=np.array([0.99, 0.0])), "target.*reachable"),
+        (dict(target=np.zeros(3)), "target.*shape"),
+        (dict(q_init=np.zeros(2)), "q_init.*shape"),
+        (dict(q_rest=np.zeros((2, 3)), target=np.zeros((3, 2))), "broadcast"),
+    ],
+)
+def test_bad_input(wrist, kwargs, match):
+    args = dict(KJ=KJ1, q_rest=QR1, target=TARGETS[0])
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        pj.equilibrium_posture(wrist, **args)
+
+
+def test_non_chain_rejected():
+    with pytest.raises(TypeError, match="chain"):
+        pj.equilibrium_posture(object(), KJ1, QR1, TARGETS[0])
