@@ -91,7 +91,8 @@ class Wrist(Chain):
 
     def fk_jac_soa(self, qc):
         d = self.d
-        (sa, sb, sc), (ca, cb, cc) = sincos(qc)
+        s, c = sincos(qc)
+        (sa, sb, sc), (ca, cb, cc) = (s[0], s[1], s[2]), (c[0], c[1], c[2])
         sbcc = sb * cc
         # Pointing axis u = R e_x = (cb cc, ca sb cc − sa sc, −sa sb cc − ca sc); x = d (−u2, u3).
         x1 = -d * (ca * sbcc - sa * sc)

@@ -11,23 +11,33 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
+def elements(A):
+    """Split a component-leading matrix (r, c, ...) into nested lists of (...) arrays.
+
+    Each entry is sliced once per call instead of once per use, which keeps graphs (and compile
+    times) small. (``jnp.unstack`` would be smaller still but blocks XLA's loop fusion on CPU:
+    measured 13× slower inside the RK4 loop.)
+    """
+    return [[A[i, j] for j in range(A.shape[1])] for i in range(A.shape[0])]
+
+
 def mv(A, v):
     """``A @ v`` for ``A`` (r, k, ...) and ``v`` (k, ...) -> (r, ...)."""
-    return jnp.stack([sum(A[i, j] * v[j] for j in range(A.shape[1])) for i in range(A.shape[0])])
+    a, v = elements(A), [v[j] for j in range(v.shape[0])]
+    return jnp.stack([sum(ai[j] * v[j] for j in range(len(v))) for ai in a])
 
 
 def mtv(A, v):
     """``A.T @ v`` for ``A`` (k, r, ...) and ``v`` (k, ...) -> (r, ...)."""
-    return jnp.stack([sum(A[j, i] * v[j] for j in range(A.shape[0])) for i in range(A.shape[1])])
+    a, v = elements(A), [v[j] for j in range(v.shape[0])]
+    return jnp.stack([sum(a[j][i] * v[j] for j in range(len(v))) for i in range(len(a[0]))])
 
 
 def mm(A, B):
     """``A @ B`` for ``A`` (r, k, ...) and ``B`` (k, c, ...) -> (r, c, ...)."""
-    r, k = A.shape[:2]
-    c = B.shape[1]
-    return jnp.stack(
-        [jnp.stack([sum(A[i, p] * B[p, j] for p in range(k)) for j in range(c)]) for i in range(r)]
-    )
+    a, b = elements(A), elements(B)
+    k, c = len(b), len(b[0])
+    return jnp.stack([jnp.stack([sum(ai[p] * b[p][j] for p in range(k)) for j in range(c)]) for ai in a])
 
 
 def spd_solve(M, b):
@@ -38,16 +48,17 @@ def spd_solve(M, b):
     m = M.shape[0]
     if m == 1:
         return b / M[0]
+    M, b = elements(M), [b[j] for j in range(m)]
     if m == 2:
-        a, c, d = M[0, 0], M[0, 1], M[1, 1]
+        a, c, d = M[0][0], M[0][1], M[1][1]
         inv_det = 1.0 / (a * d - c * c)
         return jnp.stack([(d * b[0] - c * b[1]) * inv_det, (a * b[1] - c * b[0]) * inv_det])
     L = [[None] * m for _ in range(m)]
     D = [None] * m
     for j in range(m):
-        D[j] = M[j, j] - sum(L[j][k] * L[j][k] * D[k] for k in range(j))
+        D[j] = M[j][j] - sum(L[j][k] * L[j][k] * D[k] for k in range(j))
         for i in range(j + 1, m):
-            L[i][j] = (M[i, j] - sum(L[i][k] * L[j][k] * D[k] for k in range(j))) / D[j]
+            L[i][j] = (M[i][j] - sum(L[i][k] * L[j][k] * D[k] for k in range(j))) / D[j]
     y = [None] * m
     for i in range(m):
         y[i] = b[i] - sum(L[i][k] * y[k] for k in range(i))
@@ -69,17 +80,18 @@ def spd_inv(M):
 def det(M):
     """Determinant of a small square ``M`` (m, m, ...) by cofactor expansion (m <= 3) or LU."""
     m = M.shape[0]
+    if m > 3:
+        return jnp.linalg.det(jnp.moveaxis(M, (0, 1), (-2, -1)))
+    M = elements(M)
     if m == 1:
-        return M[0, 0]
+        return M[0][0]
     if m == 2:
-        return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-    if m == 3:
-        return (
-            M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
-            - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
-            + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0])
-        )
-    return jnp.linalg.det(jnp.moveaxis(M, (0, 1), (-2, -1)))
+        return M[0][0] * M[1][1] - M[0][1] * M[1][0]
+    return (
+        M[0][0] * (M[1][1] * M[2][2] - M[1][2] * M[2][1])
+        - M[0][1] * (M[1][0] * M[2][2] - M[1][2] * M[2][0])
+        + M[0][2] * (M[1][0] * M[2][1] - M[1][1] * M[2][0])
+    )
 
 
 def to_soa(x, k: int = 1):
