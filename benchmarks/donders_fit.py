@@ -114,7 +114,9 @@ def jax_fit(rec, S, chunk):
     """Returns (compile_s, run_s, fit)."""
     x, q = rec.pointing[:S], rec.joint_angles[:S]
     w = np.ones(x.shape[:2])
-    q_mean = q.mean(1)
+    Np = 1 << (N_POST - 1).bit_length()  # fit_donders pads samples to a power of two (masked)
+    x, q, w = (np.concatenate([a, np.zeros((S, Np - N_POST) + a.shape[2:])], 1) for a in (x, q, w))
+    q_mean = rec.joint_angles[:S].mean(1)
     th0 = _starts(q_mean, 5, 3, N_STARTS, 0)
     c = min(chunk, S)
     opts = dict(n_k=5, trace=4.0, kind="torsion", tol=1e-10, max_steps=100, rcond=1e-2)
@@ -122,7 +124,9 @@ def jax_fit(rec, S, chunk):
     _fit_batch.lower(pj.Wrist(), th0[:c], x[:c], q[:c], w[:c], **opts).compile()
     t_compile = time.perf_counter() - t
     t = time.perf_counter()
-    fit = fitting.fit_donders(pj.Wrist(), x, q, n_starts=N_STARTS, chunk_size=c)
+    fit = fitting.fit_donders(
+        pj.Wrist(), rec.pointing[:S], rec.joint_angles[:S], n_starts=N_STARTS, chunk_size=c
+    )
     return t_compile, time.perf_counter() - t, fit
 
 

@@ -93,10 +93,10 @@ def main(quick=False):
         scaling[B] = B / time_min(lambda B=B: run(B), 2)
 
     t = time.perf_counter()
-    real = fitting.hugmp_ik_weights(n_boot=2, samples=100, max_iter=300)
+    real = fitting.hugmp_ik_weights(n_boot=2, samples=100, max_iter=200)
     t_real_point = time.perf_counter() - t
     t = time.perf_counter()
-    real_b = fitting.hugmp_ik_weights(n_boot=20, samples=50, max_iter=300)
+    real_b = fitting.hugmp_ik_weights(n_boot=20, samples=25, max_iter=200)
     t_real_boot = time.perf_counter() - t
 
     res = {
@@ -117,7 +117,7 @@ def main(quick=False):
           f"compile+first run {compile_s:.1f} s")
     print("batch scaling (subjects/s): " + ", ".join(f"B={b}: {v:.3g}" for b, v in scaling.items()))
     print(f"real data (4 subjects x 6 tasks): point estimate {t_real_point:.1f} s, "
-          f"bootstrap (20 replicates, 50 samples/motion) {t_real_boot:.1f} s")
+          f"bootstrap (20 replicates, 25 samples/motion) {t_real_boot:.1f} s")
     out = Path(__file__).parent / "results" / "ik_weights.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps(res, indent=1, default=float))

@@ -23,15 +23,48 @@ relative) of ``L`` computed with the SciPy reference solver, good to ~1e-8. Spee
 then the minimum of repeated runs (``block_until_ready``). Adaptive solves report their mean number
 of steps.
 
-Run: ``python benchmarks/integrators.py`` (≈ 2–3 min) or ``--quick`` (smoke run, writes nothing).
+Run: ``python benchmarks/integrators.py`` (≈ 5–8 min, mostly compiling gradients) or ``--quick`` (smoke run, writes nothing).
 
 Results (2026-11-22, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, diffrax 0.7.2, float64):
 
-RESULTS_PLACEHOLDER
+| solver | steps/traj | max abs err q(0.4) [rad] | grad rel err | B=1: compile [s] | run | grad compile [s] | grad | B=1000: compile [s] | run | grad compile [s] | grad |
+|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|
+| pmpjax RK4 scan (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 0.46+2.50 | 1.3 ms | 3.40+30.03 | 74.5 ms | 0.61+5.05 | 297.9 ms | 5.07+40.87 | 5374.3 ms |
+| diffrax RK4 (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 1.30+3.13 | 0.7 ms | 9.70+20.25 | 49.7 ms | 1.68+3.46 | 315.6 ms | 9.83+22.71 | 6252.0 ms |
+| diffrax Tsit5 (dt 1 ms) | 400 | 2.1e-13 | 8.7e-10 | 0.99+3.76 | 1.1 ms | 13.97+23.46 | 82.9 ms | 0.86+4.16 | 471.8 ms | 12.11+27.66 | 7978.2 ms |
+| diffrax Tsit5 PID (rtol 1e-8) | 74 | 1.5e-09 | 1.1e-08 | 1.87+2.30 | 0.3 ms | 8.88+13.55 | 3.6 ms | 1.06+3.57 | 58.0 ms | 11.32+32.74 | 1978.7 ms |
 
-Conclusion: CONCLUSION_PLACEHOLDER
+diffrax RK4 (dt 1 ms): run time × 0.5 (B=1), 1.1 (B=1000), gradient time × 0.7 (B=1), 1.2 (B=1000) relative to the pmpjax RK4 scan.
+diffrax Tsit5 (dt 1 ms): run time × 0.8 (B=1), 1.6 (B=1000), gradient time × 1.1 (B=1), 1.5 (B=1000) relative to the pmpjax RK4 scan.
+diffrax Tsit5 PID (rtol 1e-8): run time × 0.2 (B=1), 0.2 (B=1000), gradient time × 0.0 (B=1), 0.4 (B=1000) relative to the pmpjax RK4 scan.
+RK4 (pmpjax scan) error vs dt: 4 ms → 1.7e-10, 2 ms → 1.1e-11, 1 ms → 8.1e-13, 0.5 ms → 2.5e-13; pmpjax.simulate vs this scan solver: 1.4e-17. Load average 6.9 → 8.1.
+
+Conclusion: `pmpjax.simulate` integrates with its own classical RK4 in nested `lax.scan` loops
+(`pmpjax._integrate.integrate`), dt = 1 ms by default. What the measurements say:
+
+- **Accuracy.** At dt = 1 ms the final posture is within 8e-13 rad of the DOP853 (rtol 1e-13)
+  reference, and the error falls with the 4th power of dt (1.7e-10 at 4 ms, 1.1e-11 at 2 ms);
+  `jax.grad` of a final-state loss agrees with central differences of the reference to 9e-10.
+  diffrax's RK4 on the same steps gives the same numbers; Tsit5 on 1 ms steps is 2e-13; adaptive
+  Tsit5 at rtol 1e-8 is 1.5e-9. All are far below the 1e-6 rad the tests ask for.
+- **Speed per step.** On the same vector field the scan and diffrax's RK4 run at the same speed
+  within this loaded machine's noise (diffrax 0.55–1.2× the scan's time); Tsit5 with fixed steps
+  costs ~1.5× more at B = 1 000 (6 stages instead of 4). For fixed steps diffrax adds a dependency
+  and nothing else. (The scan's gradient compiles slower: 30–40 s against diffrax's 20–23 s.)
+- **Adaptive steps are cheaper for a final state.** Tsit5 + PID at rtol 1e-8 needs ~74 steps
+  instead of 400: ~5× faster forward and 3–20× faster gradients than RK4 at 1 ms, for 1.5e-9 rad.
+
+pmpjax keeps the fixed-step RK4 scan because fixed steps give static shapes: `SaveAt(every=N)`
+and `SaveAt(ts=...)` save on the step grid without dense-output interpolation, every trajectory of
+a batch advances in lockstep (no vmapped `while_loop` whose cost is set by the slowest element),
+the cost is known in advance, the gradient is the exact derivative of the discrete solution
+(no adjoint or checkpointing choices), and the core library has no diffrax dependency. The price,
+measured above, is ~5× more field evaluations than an adaptive solver needs for a final posture at
+1e-9. The cheapest way to recover part of it is a larger `dt`: 2 ms still gives 1.1e-11 rad at
+half the cost, and `simulate`'s RK4 stability check accepts up to 4 ms for this problem.
 """
 
+# ruff: noqa: E501  (the pasted result tables above)
 from __future__ import annotations
 
 import argparse
@@ -44,7 +77,6 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _baselines as bl  # noqa: E402
-
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
@@ -269,9 +301,9 @@ def render(res, sizes):
     L.append("")
     for r in res["solvers"][1:]:
         L.append(f"{r['solver']}: run time × " + ", ".join(
-            f"{r['speed'][str(B)]['run_s'] / base[str(B)]['run_s']:.1f} (B={B})" for B in sizes)
+            f"{r['speed'][str(B)]['run_s'] / base[str(B)]['run_s']:.2g} (B={B})" for B in sizes)
             + ", gradient time × " + ", ".join(
-            f"{r['speed'][str(B)]['grad_s'] / base[str(B)]['grad_s']:.1f} (B={B})" for B in sizes)
+            f"{r['speed'][str(B)]['grad_s'] / base[str(B)]['grad_s']:.2g} (B={B})" for B in sizes)
             + " relative to the pmpjax RK4 scan.")
     L.append("RK4 (pmpjax scan) error vs dt: " + ", ".join(
         f"{float(k) * 1e3:g} ms → {v:.1e}" for k, v in res["rk4_dt_convergence"].items())

@@ -1,8 +1,12 @@
 """The one ODE integrator: classical fixed-step RK4 in nested ``lax.scan`` loops.
 
-Chosen over diffrax by measurement (``benchmarks/integrators.py``): for these smooth, non-stiff
-0.4 s movements at dt = 1 ms it is 1e-10-accurate and several times faster per step, and reverse
-mode through ``scan`` gives the exact gradient of the discrete solution.
+Chosen by measurement against diffrax (``benchmarks/integrators.py``): on 0.4 s wrist movements
+at dt = 1 ms it is 8e-13 rad accurate (fourth order: 1.1e-11 at 2 ms), as fast per step as
+diffrax's fixed-step solvers, and compiles faster; fixed steps keep shapes static (a batch moves
+in lockstep, saves fall on the step grid, cost is known in advance), reverse mode through
+``scan`` gives the exact gradient of the discrete solution, and the core needs no diffrax.
+An adaptive Tsit5 needs ~5× fewer evaluations for 1e-9 rad final postures: use a larger ``dt``
+(``simulate`` refuses unstable ones) when such accuracy suffices.
 
 The time axis is cut into ``len(t0s)`` save segments, each integrated with ``n_steps`` equal RK4
 steps of size ``hs[i]``; ``save(t, y)`` is recorded at the end of every segment, so memory grows
