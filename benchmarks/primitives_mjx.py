@@ -96,13 +96,30 @@ def main():
         c_run = c_case(arm, q_sets[:nc], 1 if nc > 1 else a.repeats) * B / nc
         if B == 1:
             c1 = c_run
-        row = dict(batch=B, steps=B * STEPS, mjx_compile_s=comp, mjx_run_s=run, mjx_steps_per_s=B * STEPS / run,
-                   c_run_s=c_run, c_steps_per_s=B * STEPS / c_run, mjx_over_c_speed=c_run / run)
+        row = dict(
+            batch=B,
+            steps=B * STEPS,
+            mjx_compile_s=comp,
+            mjx_run_s=run,
+            mjx_steps_per_s=B * STEPS / run,
+            c_run_s=c_run,
+            c_steps_per_s=B * STEPS / c_run,
+            mjx_over_c_speed=c_run / run,
+        )
         rows.append(row)
-        print(f"B={B:5d}  MJX compile {comp:6.1f} s  run {run:8.3f} s  {row['mjx_steps_per_s']:10.0f} steps/s | "
-              f"C loop {c_run:8.3f} s  {row['c_steps_per_s']:10.0f} steps/s | MJX/C speed {row['mjx_over_c_speed']:.2f}")
-    out = dict(date="2026-11-22", machine="2-core CPU, no GPU (shared, loaded)", steps_per_rollout=STEPS,
-               dt=arm.dt, c_one_arm_s=c1, rows=rows)
+        print(
+            f"B={B:5d}  MJX compile {comp:6.1f} s  run {run:8.3f} s  "
+            f"{row['mjx_steps_per_s']:10.0f} steps/s | C loop {c_run:8.3f} s  "
+            f"{row['c_steps_per_s']:10.0f} steps/s | MJX/C speed {row['mjx_over_c_speed']:.2f}"
+        )
+    out = dict(
+        date="2026-11-22",
+        machine="2-core CPU, no GPU (shared, loaded)",
+        steps_per_rollout=STEPS,
+        dt=arm.dt,
+        c_one_arm_s=c1,
+        rows=rows,
+    )
     os.makedirs(os.path.join(os.path.dirname(__file__), "results"), exist_ok=True)
     with open(os.path.join(os.path.dirname(__file__), "results", "primitives_mjx.json"), "w") as f:
         json.dump(out, f, indent=2)

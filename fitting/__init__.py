@@ -24,6 +24,10 @@ from ._ik_analysis import overspecified_joints as overspecified_joints
 from ._ik_data import hugmp_ik_weights as hugmp_ik_weights
 from ._ik_data import prosthetic_simulation as prosthetic_simulation
 from ._ik_data import synthetic_ik_dataset as synthetic_ik_dataset
-from ._ik_examples import fig1_data as ik_fig1_data
-from ._ik_examples import fig3_data as ik_fig3_data
+from ._ik_examples import ik_fig1_data as ik_fig1_data
+from ._ik_examples import ik_fig3_data as ik_fig3_data
 from ._ik_plots import plot_ik_weights as plot_ik_weights
+from ._primitives_fit import BlendFit as BlendFit
+from ._primitives_fit import StiffnessFit as StiffnessFit
+from ._primitives_fit import fit_blend_weights as fit_blend_weights
+from ._primitives_fit import fit_stiffness as fit_stiffness

@@ -34,9 +34,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._equilibria import equilibrium_one
+from pmpjax._equilibria import equilibrium_one, equilibrium_posture
 from pmpjax._kinematics import Chain, Wrist
-from pmpjax._orientation import torsion_between, wrist_rotation
+from pmpjax._orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
 from pmpjax._validate import as_array
 
 from ._optimise import covariance, least_squares
@@ -116,7 +116,7 @@ class DondersFit:
     (S, n, n), ``q_rest_stderr`` (S, n) (delta method); ``singular_values`` (S, p) of the
     residual Jacobian; ``directions`` (S, p, p), row k = parameter combination of singular value
     k; ``identifiable`` (S, p) bool per direction (``s_k > rcond s_max``); ``direction_stderr``
-    (S, p) standard error along each direction; ``start_loss`` (S, n_starts).
+    (S, p) standard error along each direction; ``start_loss``, ``start_steps`` (S, n_starts).
     """
 
     KJ: np.ndarray
@@ -137,6 +137,7 @@ class DondersFit:
     identifiable: np.ndarray
     direction_stderr: np.ndarray
     start_loss: np.ndarray
+    start_steps: np.ndarray
     param_names: tuple[str, ...]
 
     def report(self, i: int = 0) -> str:
@@ -223,6 +224,7 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
             ident=ident,
             dse=dse,
             start_cost=jnp.where(finite, res.cost, jnp.inf),
+            start_steps=res.steps,
         )
 
     return jax.vmap(one_subject)(theta0, x, q_obs, w)
@@ -319,9 +321,17 @@ def fit_donders(
         raise ValueError(f"`max_steps` must be a positive integer, got {max_steps}")
     if not (np.isfinite(trace) and trace > 0):
         raise ValueError(f"`trace` must be positive, got {trace}")
-    chunk = S if chunk_size is None else int(chunk_size)
-    if chunk < 1:
+    if chunk_size is not None and (int(chunk_size) != chunk_size or chunk_size < 1):
         raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size}")
+    # Compiled shapes are bucketed (subjects per call: power of two >= 8 unless `chunk_size` is
+    # given; samples: power of two >= 64, padding masked out) so similar problems share a compile.
+    chunk = int(chunk_size) if chunk_size is not None else max(8, 1 << (S - 1).bit_length())
+    Np = max(64, 1 << (N - 1).bit_length())
+    if Np > N:
+        pointing, postures = (
+            np.concatenate([a, np.zeros((S, Np - N, a.shape[-1]))], 1) for a in (pointing, postures)
+        )
+        mask = np.concatenate([mask, np.zeros((S, Np - N), bool)], 1)
 
     n_k = n * (n + 1) // 2 - 1
     w = mask.astype(float)
@@ -335,7 +345,7 @@ def fit_donders(
     outs = []
     for start in range(0, S, chunk):
         sl = slice(start, min(start + chunk, S))
-        pad = chunk - (sl.stop - sl.start)
+        pad = chunk - (sl.stop - sl.start)  # padded subjects repeat the last one; dropped below
         args = [
             np.concatenate([a[sl], np.repeat(a[sl][-1:], pad, 0)]) if pad else a[sl]
             for a in (theta0, x, q_obs, w)
@@ -369,6 +379,7 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
         identifiable=o["ident"],
         direction_stderr=o["dse"],
         start_loss=o["start_cost"],
+        start_steps=o["start_steps"],
         param_names=parameter_names(chain),
     )
 
@@ -376,9 +387,6 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
 def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
     """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
     ``pointing`` (..., P, 2)."""
-    from pmpjax._equilibria import equilibrium_posture
-    from pmpjax._orientation import rotvec_from_joint_angles
-
     q = equilibrium_posture(
         chain, np.asarray(KJ)[..., None, :, :], np.asarray(q_rest)[..., None, :], pointing
     )

@@ -77,8 +77,9 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
     ``qdot`` (..., T, S, n), ``xdot`` (..., T, S, m), ``J`` (..., T, S, m, n), ``mask`` (..., T, S)
-    (a trial with no valid sample is never drawn). All ``n_boot`` replicates of every item run in
-    one vectorised :func:`estimate_ik_weights` call; ``options`` are passed on to it.
+    (a trial with no valid sample is never drawn). The estimate on the data and all ``n_boot``
+    replicates of every item run in one vectorised :func:`estimate_ik_weights` call (``options``
+    are passed on; items with unusable data are flagged, giving NaN, rather than raising).
     """
     qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
     xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
@@ -93,9 +94,6 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     mask = np.ones(tuple(batch) + (T, S), bool) if mask is None else np.asarray(mask, bool)
     if mask.shape != batch + (T, S):
         raise ValueError(f"`mask` must have shape {batch + (T, S)}, got {mask.shape}")
-    flat = lambda a: jnp.asarray(a).reshape(batch + (T * S,) + a.shape[len(batch) + 2:])  # noqa: E731
-    full = estimate_ik_weights(flat(qdot), flat(xdot), flat(J),
-                               mask=mask.reshape(batch + (T * S,)), **options)
     trial_ok = mask.any(-1)  # (..., T)
     logits = jnp.where(jnp.asarray(trial_ok), 0.0, -jnp.inf)[..., None, :]  # (..., 1, T)
     logits = jnp.broadcast_to(logits, batch + (T, T))
@@ -103,7 +101,10 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest
     n_ok = trial_ok.sum(-1)[..., None]  # (..., 1)
     Tb = int(n_ok.max())
-    idx = idx[..., :Tb]
+    # replicate 0 is the data itself (valid trials first), so one compiled call does everything
+    full = jnp.argsort(~jnp.asarray(trial_ok), axis=-1, stable=True)[None]
+    idx = jnp.concatenate([full, idx], axis=0)[..., :Tb]
+    n_boot = n_boot + 1
 
     def take(a):
         a = jnp.asarray(a)
@@ -116,12 +117,13 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     used = np.arange(Tb) < n_ok  # (..., Tb)
     mk = np.asarray(take(mask)).reshape((n_boot,) + batch + (Tb, S)) & used[..., None]
     opts = {k: v for k, v in options.items() if k != "on_invalid"}
-    res = estimate_ik_weights(take(qdot), take(xdot), take(J), mask=mk.reshape((n_boot,) + batch + (Tb * S,)),
-                              on_invalid="flag", **opts)
+    res = estimate_ik_weights(take(qdot), take(xdot), take(J), on_invalid="flag",
+                              mask=mk.reshape((n_boot,) + batch + (Tb * S,)), **opts)
     a = (1.0 - level) / 2.0
-    lo = jnp.nanquantile(res.w, a, axis=0)
-    hi = jnp.nanquantile(res.w, 1.0 - a, axis=0)
-    return BootstrapResult(w=full.w, lo=lo, hi=hi, samples=res.w, converged=res.converged)
+    ws = res.w[1:]
+    lo = jnp.nanquantile(ws, a, axis=0)
+    hi = jnp.nanquantile(ws, 1.0 - a, axis=0)
+    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=ws, converged=res.converged[1:])
 
 
 @pytree_dataclass

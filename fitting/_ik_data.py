@@ -22,8 +22,8 @@ import numpy as np
 from pmpjax._arm4 import Arm4
 from pmpjax._integrate import integrate
 from pmpjax._kinematics import PlanarArm
-from pmpjax._linalg import mv, spd_solve
-from pmpjax._redundancy import admittance_terms_diag_soa
+from pmpjax._linalg import mv
+from pmpjax._redundancy import pinv_apply_diag_soa
 
 # Contribution coefficients reported in the paper's Discussion (Eq 26) for Experiment 1:
 # Natural β = (.04, .27, .65, .04), Viscous β = (.09, .68, .14, .09) -> weights ∝ 1/β.
@@ -42,8 +42,7 @@ def _min_jerk(s):
 
 def _ik_velocity(J, w, b, g):
     """``J#_W b + N_W g`` (n, ...) with ``W = diag(w)``: one solve through the redundancy kernel."""
-    P, M = admittance_terms_diag_soa(J, 1.0 / w)
-    return g + mv(P, spd_solve(M, b - mv(J, g)))
+    return g + pinv_apply_diag_soa(J, 1.0 / w, b - mv(J, g))[0]
 
 
 @jax.jit
@@ -125,8 +124,7 @@ EQ25_K = (2.0, 0.2, 0.0)
 
 def _square_solve(Jm, b):
     """``Jm⁻¹ b`` for square (2, 2, ...) ``Jm``: the pseudo-inverse kernel with unit weights."""
-    P, M = admittance_terms_diag_soa(Jm, jnp.ones_like(Jm[0]))
-    return mv(P, spd_solve(M, b))
+    return pinv_apply_diag_soa(Jm, jnp.ones_like(Jm[0]), b)[0]
 
 
 @partial(jax.jit, static_argnames=("hold",))
@@ -146,10 +144,10 @@ def _prosthetic_run(chain, q0, targets, cond, w_user, q_hat, k_task, alpha, dt, 
         # Coupled: virtual elbow velocity = shoulder velocity
         cp = _square_solve(jnp.stack([J1, J2 + J3], 1), xd)
         # Assistive (Eq 25): q̄̇3 = J#_3 v − N_3 K (q − q̂), user corrects with hip and shoulder
-        P, M = admittance_terms_diag_soa(J, 1.0 / w_eq25)
-        Jv = mv(P, spd_solve(M, v))[2]
         g = -K * (q - q_hat)
-        null = (g - mv(P, spd_solve(M, mv(J, g))))[2]
+        Jpv, JpJg = pinv_apply_diag_soa(J, jnp.broadcast_to(1.0 / w_eq25, q.shape), v, mv(J, g))
+        Jv = Jpv[2]
+        null = (g - JpJg)[2]
         e3 = Jv + null
         at_stop = ((q[2] <= 0.0) & (e3 < 0)) | ((q[2] >= jnp.pi) & (e3 > 0))
         e3 = jnp.where(at_stop, 0.0, e3)

@@ -67,3 +67,7 @@ def fig3_data(*, w_true=(1.0, 0.01), k_task: float = 1.0, k_null: float = 1.0, d
 def fig2_gammas():
     """The γ values swept in Fig 2 / Fig 3."""
     return (0.0, 0.2, 0.4, 0.6, 0.8, 0.9)
+
+
+ik_fig1_data = fig1_data
+ik_fig3_data = fig3_data

@@ -22,9 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from pmpjax._linalg import mv, spd_solve, to_soa
+from pmpjax._linalg import mv, to_soa
 from pmpjax._pytree import pytree_dataclass
-from pmpjax._redundancy import admittance_terms_diag_soa
+from pmpjax._redundancy import pinv_apply_diag_soa
 from pmpjax._validate import as_array, is_concrete
 
 from ._optimise import least_squares
@@ -148,12 +148,8 @@ def _fixed_mask(fixed, n):
 
 def _evaluate(w, Jc, xd, qd, Jq):
     """``J# ẋ`` and ``J# J q̇`` (n, ..., K), ``ū = Jᵀ B ẋ`` through the one redundancy kernel."""
-    P, M = admittance_terms_diag_soa(Jc, 1.0 / w)  # P = W⁻¹ Jᵀ, M = J W⁻¹ Jᵀ = B⁻¹
-    y = spd_solve(M, xd)  # B ẋ
-    task = mv(P, y)  # J# ẋ = A Jᵀ B ẋ (Eq 4)
-    proj = mv(P, spd_solve(M, Jq))  # J# J q̇
-    u = w * task  # ū = Jᵀ B ẋ = W J# ẋ (Eq 18)
-    return task, proj, u
+    task, proj = pinv_apply_diag_soa(Jc, 1.0 / w, xd, Jq)  # J# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹ (Eq 4)
+    return task, proj, w * task  # ū = Jᵀ B ẋ = W J# ẋ (Eq 18)
 
 
 def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
@@ -202,13 +198,15 @@ def _algorithm1(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, *,
 
     def body(s):
         w, V, g = s["w"], s["V"], s["gamma"]
-        task, proj, u = _evaluate(w, Jc, xd, qd, Jq)
+        # materialise the per-sample solves once; otherwise XLA re-fuses them into every reduction
+        task, proj, u = lax.optimization_barrier(_evaluate(w, Jc, xd, qd, Jq))
         # Algorithm 1 lines 7–8: error with the null-space estimate of the previous iteration
         res = qd - task - V
         err = jnp.sum(jnp.sqrt(jnp.sum(res * res, axis=0)) * vf, axis=-1) / count
         Vn = g[None, ..., None] * (qd - proj) * vf[None]  # line 10: v̄ = γ (I − J# J) q̇
+        Vn, uv = lax.optimization_barrier((Vn, u * vf[None]))
         psi = qqT - _outer_sum(Vn, qd)  # Ψ = (Q̇ − V̄) Q̇ᵀ
-        omega = _outer_sum(u * vf[None], qd)  # Ω = Ū Q̇ᵀ
+        omega = _outer_sum(uv, qd)  # Ω = Ū Q̇ᵀ
         wn = _closed_form_update(w, psi, omega, w_min, w_max, fixed)[..., None]
         active = ~s["done"]
         finite = jnp.all(jnp.isfinite(wn), axis=(0, -1)) & jnp.isfinite(err)
@@ -252,7 +250,7 @@ def _algorithm1(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, *,
 
 def _outer_sum(a, b):
     """``Σ_k a_k b_kᵀ`` (n, n, *batch) of component-leading (n, *batch, K) arrays."""
-    return jnp.sum(a[:, None] * b[None], axis=-1)
+    return jnp.einsum("i...k,j...k->ij...", a, b)
 
 
 def _bmask(active):
@@ -374,8 +372,8 @@ def estimate_ik_weights(
 def _model_residual(w, qdot, xdot, J, gamma, valid):
     """``e_k = q̇_k − J#ẋ_k − γ (I − J# J) q̇_k = (1 − γ) q̇_k − J# (ẋ_k − γ J q̇_k)`` (n, ..., K)
     for weights ``w`` (n, ..., 1) (Eq 16)."""
-    P, M = admittance_terms_diag_soa(J, 1.0 / w)
-    e = (1.0 - gamma) * qdot - mv(P, spd_solve(M, xdot - gamma * mv(J, qdot)))
+    (jb,) = pinv_apply_diag_soa(J, 1.0 / w, xdot - gamma * mv(J, qdot))
+    e = (1.0 - gamma) * qdot - jb
     return e * valid[None]
 
 

@@ -51,7 +51,9 @@ def least_squares(
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
 
     def lin(x):
-        return residual(x, args), jax.jacfwd(residual)(x, args)
+        # One pass: the residual rides along as jacfwd's aux output (no second primal solve).
+        J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
+        return r, J
 
     r0, J0 = lin(x0)
     if r0.ndim != 1:

@@ -12,7 +12,6 @@ import functools
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from pmpjax._arm import CogArm
 from pmpjax._primitives import _equilibrium_one, check_set_point, check_stiffness
@@ -59,15 +58,19 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     res = _fit_blend(arm.mjx_model, arm.layout.hand_site, P, K, target.reshape(-1, 3), int(max_steps))
     alpha, hand, steps, conv = res
     err = jnp.linalg.norm(hand - target.reshape(-1, 3), axis=-1)
-    return BlendFit(alpha=alpha.reshape(batch + (P.shape[0],)), hand=hand.reshape(batch + (3,)),
-                    error=err.reshape(batch), converged=(conv & (err <= tol)).reshape(batch),
-                    steps=steps.reshape(batch))
+    return BlendFit(
+        alpha=alpha.reshape(batch + (P.shape[0],)),
+        hand=hand.reshape(batch + (3,)),
+        error=err.reshape(batch),
+        converged=(conv & (err <= tol)).reshape(batch),
+        steps=steps.reshape(batch),
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("site_id", "max_steps"))
 def _fit_blend(mx, site_id, P, K, targets, max_steps):
     def hand_of(z):
-        _, hand, _, _ = _equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, 60, 1e-10)
+        _, hand, _, _ = _equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, 12, 0.0, diagnostics=False)
         return hand
 
     def one(target):
@@ -103,17 +106,22 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
     K0 = check_stiffness("K0", arm.K if K0 is None else K0, n)
     batch = q_obs.shape[:-2]
     flat = q_obs.reshape((-1,) + q_set.shape)
-    kappa, rms, steps, conv = _fit_stiffness(arm.mjx_model, arm.layout.hand_site, q_set, flat,
-                                             jnp.log(K0), int(max_steps))
-    return StiffnessFit(K=jnp.exp(kappa).reshape(batch + (n,)), rms=rms.reshape(batch),
-                        converged=conv.reshape(batch), steps=steps.reshape(batch))
+    kappa, rms, steps, conv = _fit_stiffness(
+        arm.mjx_model, arm.layout.hand_site, q_set, flat, jnp.log(K0), int(max_steps)
+    )
+    return StiffnessFit(
+        K=jnp.exp(kappa).reshape(batch + (n,)),
+        rms=rms.reshape(batch),
+        converged=conv.reshape(batch),
+        steps=steps.reshape(batch),
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("site_id", "max_steps"))
 def _fit_stiffness(mx, site_id, q_set, q_obs, kappa0, max_steps):
     def resid(kappa, q_o):
         K = jnp.exp(kappa)
-        q = jax.vmap(lambda qs: _equilibrium_one(mx, site_id, qs, K, 60, 1e-10)[0])(q_set)
+        q = jax.vmap(lambda qs: _equilibrium_one(mx, None, qs, K, 12, 0.0, diagnostics=False)[0])(q_set)
         return (q - q_o).reshape(-1)
 
     def one(q_o):

@@ -99,7 +99,9 @@ def _as_mj_model(xml_or_model) -> mujoco.MjModel:
     if isinstance(xml_or_model, mujoco.MjModel):
         return xml_or_model
     if not isinstance(xml_or_model, str):
-        raise TypeError(f"`xml_or_model` must be a path, MJCF string or mujoco.MjModel, got {type(xml_or_model).__name__}")
+        raise TypeError(
+            f"`xml_or_model` must be a path, MJCF string or mujoco.MjModel, got {type(xml_or_model).__name__}"
+        )
     try:
         if xml_or_model.lstrip().startswith("<"):
             return mujoco.MjModel.from_xml_string(xml_or_model)
@@ -238,7 +240,7 @@ def _rollout_batch(mx, layout, controller, K, B, q0, qdot0, q_set0, c0, inputs):
 def _broadcast_batch(batch, x, core):
     x = jnp.asarray(x)
     B = math.prod(batch)
-    return jnp.broadcast_to(x, batch + x.shape[x.ndim - core:]).reshape((B,) + x.shape[x.ndim - core:])
+    return jnp.broadcast_to(x, batch + x.shape[x.ndim - core :]).reshape((B,) + x.shape[x.ndim - core :])
 
 
 def check_gains(arm: CogArm, K, B):
@@ -249,7 +251,9 @@ def check_gains(arm: CogArm, K, B):
     B = as_array("B", B, tail=(n,))
     if is_concrete(K):
         if np.any(np.asarray(K) <= 0):
-            raise ValueError(f"`K` (joint stiffness) must be positive, got min {np.min(np.asarray(K)):.3g} Nm/rad")
+            raise ValueError(
+                f"`K` (joint stiffness) must be positive, got min {np.min(np.asarray(K)):.3g} Nm/rad"
+            )
         w = arm.dt * np.sqrt(np.max(np.asarray(K) / arm.inertia_diag))
         if w > 0.5:
             raise ValueError(f"`K` is too stiff for dt={arm.dt} s (dt·sqrt(K/M) = {w:.2f} > 0.5)")
@@ -258,7 +262,9 @@ def check_gains(arm: CogArm, K, B):
             raise ValueError(f"`B` (joint damping) must be non-negative, got min {np.min(np.asarray(B)):.3g}")
         r = arm.dt * np.max(np.asarray(B) / arm.inertia_diag)
         if r > 1.0:
-            raise ValueError(f"`B` is too large for the explicit damping step dt={arm.dt} s (dt·B/M = {r:.2f} > 1)")
+            raise ValueError(
+                f"`B` is too large for the explicit damping step dt={arm.dt} s (dt·B/M = {r:.2f} > 1)"
+            )
     return jnp.asarray(K, float), jnp.asarray(B, float)
 
 
@@ -298,23 +304,52 @@ def run_controller(
     force = np.zeros((T, 3)) if force is None else force
     probe = jnp.asarray(as_array("probe", probe, tail=(T, 3)), float)
     force = jnp.asarray(as_array("force", force, tail=(T, 3)), float)
-    batch = tuple(np.broadcast_shapes(batch_shape, K.shape[:-1], B.shape[:-1], q0.shape[:-1], qdot0.shape[:-1],
-                                      q_set0.shape[:-1], probe.shape[:-2], force.shape[:-2]))
+    batch = tuple(
+        np.broadcast_shapes(
+            batch_shape,
+            K.shape[:-1],
+            B.shape[:-1],
+            q0.shape[:-1],
+            qdot0.shape[:-1],
+            q_set0.shape[:-1],
+            probe.shape[:-2],
+            force.shape[:-2],
+        )
+    )
     flat = lambda x, core: _broadcast_batch(batch, x, core)  # noqa: E731
     ctrl = jax.tree_util.tree_map(lambda x: flat(x, jnp.ndim(x) - len(batch_shape)), ctrl_inputs)
     qs0 = flat(q_set0, 1)
     c0 = jax.vmap(controller.init)(qs0)
     (t, q, qd, qs, tau, touch, hand, log), qT, qdT = _rollout_batch(
-        arm.mjx_model, arm.layout, controller, flat(K, 1), flat(B, 1), flat(q0, 1), flat(qdot0, 1), qs0, c0,
+        arm.mjx_model,
+        arm.layout,
+        controller,
+        flat(K, 1),
+        flat(B, 1),
+        flat(q0, 1),
+        flat(qdot0, 1),
+        qs0,
+        c0,
         (ctrl, flat(probe, 2), flat(force, 2)),
     )
     shape = lambda a: a.reshape(batch + a.shape[1:])  # noqa: E731
-    return ArmTrajectory(t=t[0], q=shape(q), qdot=shape(qd), q_set=shape(qs), tau=shape(tau),
-                         touch=shape(touch), hand=shape(hand), q_final=shape(qT), qdot_final=shape(qdT),
-                         log=jax.tree_util.tree_map(shape, log))
+    return ArmTrajectory(
+        t=t[0],
+        q=shape(q),
+        qdot=shape(qd),
+        q_set=shape(qs),
+        tau=shape(tau),
+        touch=shape(touch),
+        hand=shape(hand),
+        q_final=shape(qT),
+        qdot_final=shape(qdT),
+        log=jax.tree_util.tree_map(shape, log),
+    )
 
 
-def rollout(arm: CogArm, q_set, *, K=None, B=None, q0=None, qdot0=None, probe=None, force=None) -> ArmTrajectory:
+def rollout(
+    arm: CogArm, q_set, *, K=None, B=None, q0=None, qdot0=None, probe=None, force=None
+) -> ArmTrajectory:
     """Open-loop rollout: set-points ``q_set`` (..., T, n) [rad], one per MuJoCo step.
 
     ``K``, ``B`` (..., n) joint stiffness/damping (default the arm's); ``q0``, ``qdot0`` (..., n)
@@ -326,6 +361,17 @@ def rollout(arm: CogArm, q_set, *, K=None, B=None, q0=None, qdot0=None, probe=No
     q_set = jnp.asarray(q_set, float)
     if q0 is None:
         q0 = q_set[..., 0, :]
-    return run_controller(arm, Scripted(), q_set, n_steps=q_set.shape[-2], K=K, B=B, q0=q0,
-                          qdot0=qdot0, q_set0=q_set[..., 0, :], probe=probe, force=force,
-                          batch_shape=q_set.shape[:-2])
+    return run_controller(
+        arm,
+        Scripted(),
+        q_set,
+        n_steps=q_set.shape[-2],
+        K=K,
+        B=B,
+        q0=q0,
+        qdot0=qdot0,
+        q_set0=q_set[..., 0, :],
+        probe=probe,
+        force=force,
+        batch_shape=q_set.shape[:-2],
+    )

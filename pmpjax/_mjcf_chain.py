@@ -8,6 +8,7 @@ the chain can be passed through ``jax.jit`` like the other chains.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import jax
@@ -77,6 +78,42 @@ def _is_hinge(mx) -> np.ndarray:
     return np.asarray(mx.jnt_type)[:, None] == int(mujoco.mjtJoint.mjJNT_HINGE)
 
 
+def _moves_joint(mx) -> np.ndarray:
+    """(njnt, njnt) bool R[i, j]: joint i moves joint j's frame (ancestor, or same body and
+    earlier in MuJoCo's joint order, or i == j)."""
+    inside = _subtree_mask(mx)
+    body = np.asarray(mx.jnt_bodyid)
+    idx = np.arange(body.size)
+    R = inside[:, body] > 0
+    same = body[:, None] == body[None, :]
+    return R & (~same | (idx[:, None] <= idx[None, :]))
+
+
+def gravity_terms(mx, q):
+    """``(∇V (nv,), ∇²V (nv, nv), d)`` at ``q`` from one kinematics pass (hinge joints only);
+    ``d`` is the kinematics ``mjx.Data`` (for site positions).
+
+    With ``m_j = M_j (C_j − p_j)`` (subtree mass moment about joint j) and ``G_ij =
+    −gᵀ (a_i × (a_j × m_j))``: ``∂²V/∂q_j∂q_i = G_ij`` when joint i moves joint j (rotating the
+    whole of ``a_j × m_j``), ``G_ji`` when j moves i, else 0 (the Jacobi identity gives symmetry).
+    """
+    if not np.all(_is_hinge(mx)):
+        raise ValueError("gravity_terms supports hinge joints only")
+    with jax.numpy_rank_promotion("allow"):
+        d = kinematics(mx, q)
+        mass = _subtree_mask(mx) * mx.body_mass[None, :]
+        arm = mass @ d.xipos - jnp.sum(mass, axis=1)[:, None] * d.xanchor
+        inner = jnp.cross(d.xaxis, arm)  # a_j × m_j
+        G = -(jnp.cross(d.xaxis[:, None, :], inner[None, :, :]) @ mx.opt.gravity)  # G[i, j]
+        R = _moves_joint(mx)
+        return -(inner @ mx.opt.gravity), jnp.where(R.T, G.T, jnp.where(R, G, 0.0)), d
+
+
+def gravity_hessian(mx, q):
+    """``∇²V(q)`` (nv, nv) [Nm/rad], exact, hinge joints only (see :func:`gravity_terms`)."""
+    return gravity_terms(mx, q)[1]
+
+
 def site_jacobian(mx, site_id: int, q):
     """Site position ``x`` (3,) and translational Jacobian ``J`` (3, nv) at ``q`` from one MJX
     kinematics pass (as ``mj_jacSite``): column j is ``a_j × (x − p_j)`` for a hinge moving the
@@ -87,6 +124,24 @@ def site_jacobian(mx, site_id: int, q):
         moves = _subtree_mask(mx)[:, int(np.asarray(mx.site_bodyid)[site_id])][:, None]
         cols = jnp.where(_is_hinge(mx), jnp.cross(d.xaxis, x[None, :] - d.xanchor), d.xaxis)
         return x, (moves * cols).T
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _site_pos(site_id, mx, q):
+    return kinematics(mx, q).site_xpos[site_id]
+
+
+@_site_pos.defjvp
+def _site_pos_jvp(site_id, primals, tangents):
+    mx, q = primals
+    x, J = site_jacobian(mx, site_id, q)
+    return x, J @ tangents[1]
+
+
+def site_position(mx, site_id: int, q):
+    """Site position (3,) at ``q``, differentiable with the analytic Jacobian (``custom_jvp``):
+    derivatives never trace MJX kinematics, which keeps compile times small."""
+    return _site_pos(int(site_id), mx, q)
 
 
 @pytree_dataclass
@@ -139,8 +194,8 @@ class MjcfChain(Chain):
         object.__setattr__(self, "reach", float(reach))
 
     def site_position(self, q):
-        """Site position (3,) for one posture ``q`` (n,)."""
-        return kinematics(self.mjx_model, q).site_xpos[self.site_id]
+        """Site position (3,) for one posture ``q`` (n,) (differentiable)."""
+        return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
         flat = qc.reshape(self.n, -1).T

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._arm import CogArm
-from ._mjcf_chain import MjcfChain, gravity_gradient, kinematics
+from ._mjcf_chain import MjcfChain, gravity_gradient, gravity_terms, site_position
 from ._pytree import pytree_dataclass
 from ._redundancy import weighted_pinv
 from ._validate import as_array, check_positive, is_concrete
@@ -93,40 +93,49 @@ class ArmEquilibrium:
     converged: jax.Array
 
 
-def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol):
-    def grad_U(q):
-        return K * (q - q_set) + gravity_gradient(mx, q)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _solve_equilibrium(n_iter, mx, q_set, K):
+    def newton(_, q):
+        g, H, _ = gravity_terms(mx, q)
+        dq = -jnp.linalg.solve(jnp.diag(K) + H, K * (q - q_set) + g)
+        # Cap the step (0.5 rad, ∞-norm) so a far start cannot jump across the workspace.
+        return q + dq * jnp.minimum(1.0, 0.5 / jnp.maximum(jnp.max(jnp.abs(dq)), 1e-300))
 
-    # Fixed point θ = θ_set − K⁻¹ ∇V(θ) (the spring-preconditioned Richardson iteration on ∇U).
-    # It contracts iff ρ(K⁻¹ ∇²V) < 1. No Hessian is formed by autodiff (its compile cost
-    # through MJX kinematics is large); the same iteration solves the implicit-gradient system.
-    def fixed_point(f, q0):
-        return jax.lax.fori_loop(0, n_iter, lambda _, q: q - f(q) / K, q0)
-
-    def tangent_solve(g, y):
-        return jax.lax.fori_loop(0, n_iter, lambda _, x: x + (y - g(x)) / K, y / K)
-
-    q = jax.lax.custom_root(grad_U, q_set, fixed_point, tangent_solve)
-    qs = jax.lax.stop_gradient(q)
-    res = jnp.max(jnp.abs(grad_U(qs)))
-    # Stability: K + ∇²V positive definite, ∇²V by central differences of the closed-form ∇V.
-    h = 1e-5
-    E = h * jnp.eye(K.shape[0], dtype=qs.dtype)
-    gv = jax.vmap(lambda p: gravity_gradient(mx, p))(jnp.concatenate([qs[None] + E, qs[None] - E]))
-    Hv = (gv[: K.shape[0]] - gv[K.shape[0]:]) / (2 * h)
-    stable = jnp.min(jnp.linalg.eigvalsh(jnp.diag(K) + 0.5 * (Hv + Hv.T))) > 0
-    hand = kinematics(mx, q).site_xpos[site_id]
-    return q, hand, res, (res <= tol * (1.0 + jnp.max(K))) & stable
+    return jax.lax.fori_loop(0, n_iter, newton, q_set)
 
 
-def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 60, tol: float = 1e-10) -> ArmEquilibrium:
+@_solve_equilibrium.defjvp
+def _solve_equilibrium_jvp(n_iter, primals, tangents):
+    # Implicit function theorem on K (θ − θ_set) + ∇V(θ) = 0:
+    # (K + ∇²V) dθ = K dθ_set − dK ⊙ (θ − θ_set).  (The model's tangents are ignored.)
+    mx, qs, K = primals
+    _, dqs, dK = tangents
+    q = _solve_equilibrium(n_iter, mx, qs, K)
+    H = gravity_terms(mx, q)[1]
+    return q, jnp.linalg.solve(jnp.diag(K) + H, K * dqs - dK * (q - qs))
+
+
+def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
+    q = _solve_equilibrium(int(n_iter), mx, q_set, K)
+    if not diagnostics:  # lean version for fits: no residual/stability kinematics passes
+        return q, (None if site_id is None else site_position(mx, site_id, q)), None, None
+    g, H, d = gravity_terms(mx, jax.lax.stop_gradient(q))
+    Ks = jax.lax.stop_gradient(K)
+    res = jnp.max(jnp.abs(Ks * (jax.lax.stop_gradient(q) - jax.lax.stop_gradient(q_set)) + g))
+    stable = jnp.min(jnp.linalg.eigvalsh(jnp.diag(Ks) + H)) > 0
+    # Hand position with its analytic Jacobian, so derivatives never trace MJX kinematics.
+    hand = site_position(mx, site_id, q)
+    return q, hand, res, (res <= tol * (1.0 + jnp.max(Ks))) & stable
+
+
+def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
     """Equilibrium posture of the springy arm under gravity for set-points ``q_set`` (..., n).
 
-    Solves ``K (θ − θ_set) + ∇V(θ) = 0`` (springs balance gravity, no velocity) by the fixed-point
-    iteration ``θ ← θ_set − K⁻¹ ∇V(θ)`` from ``θ_set`` (``n_iter`` steps; linear convergence at
-    rate ρ(K⁻¹∇²V), about 0.3 for the default arm), ``∇V`` in closed form from MJX kinematics;
-    gradients by the implicit function theorem (``lax.custom_root``). ``K`` (..., n) [Nm/rad], default the
-    arm's. Leading axes broadcast. ``converged`` flags each item.
+    Solves ``K (θ − θ_set) + ∇V(θ) = 0`` (springs balance gravity, no velocity) by Newton's method
+    from ``θ_set`` (``n_iter`` steps) with ``∇V`` and the exact ``∇²V`` in closed form from one MJX
+    kinematics pass (autodiff through MJX kinematics would cost minutes of compile time);
+    derivatives by the implicit function theorem (``jax.custom_jvp``, forward and reverse mode).
+    ``K`` (..., n) [Nm/rad], default the arm's. Leading axes broadcast. ``converged`` flags each item.
     """
     n = arm.n
     q_set = check_set_point("q_set", q_set, n)
@@ -135,9 +144,15 @@ def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 60, tol: float = 1e
     B = math.prod(batch)
     qs = jnp.broadcast_to(q_set, batch + (n,)).reshape(B, n)
     Ks = jnp.broadcast_to(K, batch + (n,)).reshape(B, n)
-    q, hand, res, ok = _equilibrium_batch(arm.mjx_model, arm.layout.hand_site, qs, Ks, int(n_iter), float(tol))
-    return ArmEquilibrium(q=q.reshape(batch + (n,)), hand=hand.reshape(batch + (3,)),
-                          residual=res.reshape(batch), converged=ok.reshape(batch))
+    q, hand, res, ok = _equilibrium_batch(
+        arm.mjx_model, arm.layout.hand_site, qs, Ks, int(n_iter), float(tol)
+    )
+    return ArmEquilibrium(
+        q=q.reshape(batch + (n,)),
+        hand=hand.reshape(batch + (3,)),
+        residual=res.reshape(batch),
+        converged=ok.reshape(batch),
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("site_id", "n_iter", "tol"))

@@ -20,16 +20,32 @@ def admittance_terms_soa(J, A):
     return P, mm(J, P)
 
 
-def admittance_terms_diag_soa(J, a):
-    """:func:`admittance_terms_soa` for a diagonal ``A = diag(a)``, ``a`` (n, ...): ``P = A Jᵀ``
-    (n, m, ...) and ``M = J A Jᵀ`` (m, m, ...) without multiplying by the zeros of ``A``."""
+def _diag_terms(J, a):
+    """Nested lists ``P[i][r] = a_i J_ri`` and ``M[r][c] = Σ_i J_ri a_i J_ci`` (no stacking, so
+    XLA fuses everything that reads them into one loop)."""
     m, n = J.shape[:2]
-    P = jnp.stack([jnp.stack([a[i] * J[r, i] for r in range(m)]) for i in range(n)])
-    cols = {}
+    P = [[a[i] * J[r, i] for r in range(m)] for i in range(n)]
+    M = [[None] * m for _ in range(m)]
     for r in range(m):
         for c in range(r, m):
-            cols[r, c] = cols[c, r] = sum(J[r, i] * P[i, c] for i in range(n))
-    return P, jnp.stack([jnp.stack([cols[r, c] for c in range(m)]) for r in range(m)])
+            M[r][c] = M[c][r] = sum(J[r, i] * P[i][c] for i in range(n))
+    return P, M
+
+
+def pinv_apply_diag_soa(J, a, *rhs):
+    """``J#_W b = A Jᵀ (J A Jᵀ)⁻¹ b`` (n, ...) for each ``b`` (m, ...) in ``rhs``, ``A = diag(a)``.
+
+    The weighted pseudo-inverse applied without forming it: one ``M = J A Jᵀ`` shared by all
+    right-hand sides, no intermediate stacked ``P`` (several times faster on CPU for large batches).
+    """
+    P, M = _diag_terms(J, a)
+    Ms = jnp.stack([jnp.stack(r) for r in M])
+    m, n = len(M), len(P)
+    out = []
+    for b in rhs:
+        y = spd_solve(Ms, b)
+        out.append(jnp.stack([sum(P[i][r] * y[r] for r in range(m)) for i in range(n)]))
+    return out
 
 
 def pinv_soa(J, A):

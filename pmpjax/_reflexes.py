@@ -8,8 +8,9 @@ Subsumption layers (higher ones suppress the lower):
   reference torque refreshed every ``lead_refresh`` s; where it deviates by more than
   ``lead_threshold`` the set-point is backed off (each joint independently) so the deviation is
   clipped at the threshold. Targets are suppressed; afterwards reaching resumes from the set-point.
-- **grasp**: palm touch → a move from the current target back to the set-point held when touched
-  (superposition: it cancels the ongoing move smoothly), targets suppressed until ``release``.
+- **grasp**: palm touch → a move from the current target to the posture where the arm was
+  touched (superposition: it cancels the ongoing move smoothly; the arm then rests there up to
+  its gravity sag, as in Figure 8), targets suppressed until ``release``.
 - **withdrawal** (top): back-of-hand touch → winner-take-all: ongoing moves are dropped and a fast
   move returns the set-point to the rest primitive; targets suppressed until ``release``.
 
@@ -115,17 +116,31 @@ class ReflexNetwork:
     slots: int = static_field(default=4)
 
     def __post_init__(self):
-        for name in ("reach_duration", "grasp_duration", "withdraw_duration", "touch_threshold",
-                     "lead_threshold", "lead_refresh", "dt"):
+        for name in (
+            "reach_duration",
+            "grasp_duration",
+            "withdraw_duration",
+            "touch_threshold",
+            "lead_threshold",
+            "lead_refresh",
+            "dt",
+        ):
             check_positive(name, getattr(self, name))
         object.__setattr__(self, "rest", jnp.asarray(as_array("rest", self.rest, tail=(None,)), float))
 
     def init(self, q_set0):
         S, n = self.slots, q_set0.shape[-1]
         z = jnp.zeros((), q_set0.dtype)
-        return ReflexState(q_set=q_set0, target_end=q_set0, t0=jnp.zeros(S) + z,
-                           duration=jnp.ones(S) + z, delta=jnp.zeros((S, n)) + z,
-                           mode=jnp.asarray(REACH), tau_ref=jnp.zeros(n) + z, t_ref=z)
+        return ReflexState(
+            q_set=q_set0,
+            target_end=q_set0,
+            t0=jnp.zeros(S) + z,
+            duration=jnp.ones(S) + z,
+            delta=jnp.zeros((S, n)) + z,
+            mode=jnp.asarray(REACH),
+            tau_ref=jnp.zeros(n) + z,
+            t_ref=z,
+        )
 
     def step(self, s: ReflexState, obs, inp, K):
         t = obs.t
@@ -147,9 +162,10 @@ class ReflexNetwork:
 
         # One new move per step at most (the events are exclusive).
         add = start_wd | start_gr | new_tg
-        goal = jnp.where(start_wd, self.rest, jnp.where(start_gr, q_set, inp.target))
-        dur = jnp.where(start_wd, self.withdraw_duration,
-                        jnp.where(start_gr, self.grasp_duration, self.reach_duration))
+        goal = jnp.where(start_wd, self.rest, jnp.where(start_gr, obs.q, inp.target))
+        dur = jnp.where(
+            start_wd, self.withdraw_duration, jnp.where(start_gr, self.grasp_duration, self.reach_duration)
+        )
         end = s.t0 + s.duration
         k = jnp.argmin(end)
         # A still-running move in the reused slot hands its remainder to the new move.
@@ -170,12 +186,23 @@ class ReflexNetwork:
         q_set = jnp.where(leading, q_lead, q_set)
         target_end = jnp.where(leading, q_set, target_end)
 
-        mode = jnp.where(start_wd, WITHDRAW, jnp.where(start_gr, GRASP, jnp.where(
-            start_lead, LEAD, jnp.where(end_lead, REACH, mode))))
+        mode = jnp.where(
+            start_wd,
+            WITHDRAW,
+            jnp.where(start_gr, GRASP, jnp.where(start_lead, LEAD, jnp.where(end_lead, REACH, mode))),
+        )
         # Exact integral of the summed minimum-jerk velocities over [t, t + dt].
         inc = (_xi((t + self.dt - t0) / duration) - _xi((t - t0) / duration)) @ delta
-        state = ReflexState(q_set=q_set + inc, target_end=target_end, t0=t0, duration=duration,
-                            delta=delta, mode=mode, tau_ref=tau_ref, t_ref=t_ref)
+        state = ReflexState(
+            q_set=q_set + inc,
+            target_end=target_end,
+            t0=t0,
+            duration=duration,
+            delta=delta,
+            mode=mode,
+            tau_ref=tau_ref,
+            t_ref=t_ref,
+        )
         return state, q_set, {"mode": mode, "tau_ref": tau_ref}
 
 
@@ -185,8 +212,17 @@ def reflex_network(arm: CogArm, **params) -> ReflexNetwork:
     return ReflexNetwork(dt=arm.dt, **params)
 
 
-def run_reflexes(arm: CogArm, network: ReflexNetwork, inputs: ReflexInputs, *, probe=None, force=None,
-                 K=None, B=None, q0=None) -> ArmTrajectory:
+def run_reflexes(
+    arm: CogArm,
+    network: ReflexNetwork,
+    inputs: ReflexInputs,
+    *,
+    probe=None,
+    force=None,
+    K=None,
+    B=None,
+    q0=None,
+) -> ArmTrajectory:
     """Closed-loop rollout of the reflex network on the MJX arm.
 
     ``inputs`` (:class:`ReflexInputs`, leaves (…, T, ·)) drive the target generator and the
@@ -215,8 +251,19 @@ def run_reflexes(arm: CogArm, network: ReflexNetwork, inputs: ReflexInputs, *, p
         touch=jnp.broadcast_to(jnp.asarray(inputs.touch, float), batch + (T, 2)),
     )
     q0 = arm.q_rest if q0 is None else q0
-    return run_controller(arm, network, inputs, n_steps=T, K=K, B=B, q0=q0, q_set0=q0, probe=probe,
-                          force=force, batch_shape=batch)
+    return run_controller(
+        arm,
+        network,
+        inputs,
+        n_steps=T,
+        K=K,
+        B=B,
+        q0=q0,
+        q_set0=q0,
+        probe=probe,
+        force=force,
+        batch_shape=batch,
+    )
 
 
 def stack_inputs(inputs) -> ReflexInputs:

@@ -270,29 +270,32 @@ LOW_NOISE = 0.01  # deg: the regime where the Gauss–Newton (linearised) standa
 
 @pytest.fixture(scope="module")
 def nio():
-    """One batched call: the six Table subjects (0.5° noise), two at low noise, one failing."""
+    """One batched call: the six Table subjects (0.5° noise), one at low noise, one failing."""
     names, K, q = pj.paper_subjects()
-    idx = [0, 1, 2, 3, 4, 5, 0, 3]
-    rec = pj.synthetic_recordings(K[idx], q[idx], N_FIT, noise_deg=[0.5] * 6 + [LOW_NOISE] * 2, seed=11)
+    idx = [0, 1, 2, 3, 4, 5, 3]
+    rec = pj.synthetic_recordings(K[idx], q[idx], N_FIT, noise_deg=[0.5] * 6 + [LOW_NOISE], seed=11)
     pointing = np.concatenate([rec.pointing, rec.pointing[:1]])
     postures = np.concatenate([rec.joint_angles, rec.joint_angles[:1]])
     mask = np.ones(pointing.shape[:2], bool)
-    mask[-1, 5:] = False  # subject 9: 5 samples < 8 parameters -> cannot be fitted
+    mask[-1, 5:] = False  # subject 8: 5 samples < 8 parameters -> cannot be fitted
     res = fitting.fit_donders(pj.Wrist(), pointing, postures, mask=mask, n_starts=2, seed=0)
     truth = np.concatenate([fitting.params_from_stiffness(K), q], -1)
-    return res, np.concatenate([truth, truth[[0, 3]], truth[:1]]), K, q
+    return res, np.concatenate([truth, truth[[3]], truth[:1]]), K, q
 
 
 def test_nio_converges_and_flags_failing_subject(nio):
     res, _, _, _ = nio
-    assert res.KJ.shape == (9, 3, 3) and res.start_loss.shape == (9, 2)
-    assert np.all(res.converged[:8]) and np.all(res.status[:8] == 0)
-    assert not res.converged[8] and res.status[8] == 3
+    assert res.KJ.shape == (8, 3, 3) and res.start_loss.shape == (8, 2)
+    assert np.all(res.converged[:7]) and np.all(res.status[:7] == 0)
+    assert not res.converged[7] and res.status[7] == 3
     np.testing.assert_allclose(np.trace(res.KJ, axis1=1, axis2=2), 4.0, rtol=1e-12)
     assert np.all(np.linalg.eigvalsh(res.KJ) > 0)
     # residual RMS ≈ torsional share of 0.5° isotropic noise (0.5/√3 = 0.29°)
     assert np.all(np.abs(np.rad2deg(res.rms[:6]) - 0.5 / np.sqrt(3)) < 0.05)
-    assert "UNIDENTIFIABLE" in res.report(0) or res.identifiable[0].all()
+    # torsion over ±20° pins down at most ~6 combinations (a quadratic surface): the weakest of the
+    # 8 directions are flagged, and the report names them
+    assert np.all(res.identifiable[:6, :4]) and not np.any(res.identifiable[:6, -1])
+    assert "UNIDENTIFIABLE" in res.report(0)
 
 
 def test_nio_predicts_held_out_torsion(nio):
@@ -308,7 +311,7 @@ def test_nio_parameters_within_three_standard_errors(nio):
     res, truth, _, _ = nio
     # Along identifiable directions (rows of `directions`), in the regime where the linearised
     # covariance is valid (low noise; at 0.5° the weak directions' curvature biases the rest).
-    for i in (6, 7):
+    for i in (6,):
         z = res.directions[i] @ (res.params[i] - truth[i]) / res.direction_stderr[i]
         assert np.all(np.abs(z[res.identifiable[i]]) < 3), z
 

@@ -1,0 +1,85 @@
+"""Figures of Williamson (1996): summed set-point moves (Figure 4), reflex traces (Figures 8–10),
+and the force field of a posture (Figure 2 style). Each returns the matplotlib ``Figure``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._arm import JOINTS, ArmTrajectory
+from ._primitives import Moves, force_field, summed_moves
+
+
+def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
+    """Figure 4: the individual moves' set-points and velocities (thin) and their sum (dotted)."""
+    import matplotlib.pyplot as plt
+
+    t = np.asarray(t, float)
+    start = np.atleast_1d(np.asarray(start, float))
+    fig, (ax_p, ax_v) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
+    base = start.copy()
+    for j in range(np.shape(moves.delta)[0]):
+        one = Moves(t0=moves.t0[j : j + 1], duration=moves.duration[j : j + 1], delta=moves.delta[j : j + 1])
+        p, v = summed_moves(one, base, t)
+        ax_p.plot(t, np.asarray(p)[:, joint], lw=1, label=f"move {j + 1}")
+        ax_v.plot(t, np.asarray(v)[:, joint], lw=1)
+        base = base + np.asarray(moves.delta[j])
+    p, v = summed_moves(moves, start, t)
+    ax_p.plot(t, np.asarray(p)[:, joint], "k:", lw=2, label="sum")
+    ax_v.plot(t, np.asarray(v)[:, joint], "k:", lw=2)
+    ax_p.set_ylabel("set-point [rad]")
+    ax_v.set_ylabel("velocity [rad/s]")
+    ax_v.set_xlabel("time [s]")
+    ax_p.legend(frameon=False)
+    return fig
+
+
+def plot_reflex(traj: ArmTrajectory, *, joint: int = 0, sensor: str = "palm", title: str = ""):
+    """Figures 8–10: sensor trace on top (touch [N], or the joint torque and its lead reference
+    for ``sensor="torque"``), set-point (solid) and actual joint angle (dashed) below."""
+    import matplotlib.pyplot as plt
+
+    t = np.asarray(traj.t)
+    fig, (ax_s, ax_q) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
+    if sensor == "torque":
+        ax_s.plot(t, np.asarray(traj.tau)[:, joint], "k-", label="torque")
+        if traj.log is not None and "tau_ref" in traj.log:
+            ax_s.plot(t, np.asarray(traj.log["tau_ref"])[:, joint], "k--", label="reference")
+        ax_s.set_ylabel(f"{JOINTS[joint]} torque [Nm]")
+        ax_s.legend(frameon=False)
+    else:
+        idx = {"palm": 0, "back": 1}[sensor]
+        ax_s.plot(t, np.asarray(traj.touch)[:, idx], "k-")
+        ax_s.set_ylabel(f"{sensor} touch [N]")
+    ax_q.plot(t, np.asarray(traj.q_set)[:, joint], "k-", label="set-point")
+    ax_q.plot(t, np.asarray(traj.q)[:, joint], "k--", label="actual")
+    ax_q.set_ylabel(f"{JOINTS[joint]} [rad]")
+    ax_q.set_xlabel("time [s]")
+    ax_q.legend(frameon=False)
+    if title:
+        ax_s.set_title(title)
+    return fig
+
+
+def plot_force_field(chain, q_set, K, *, joints=(0, 3), span: float = 0.6, n: int = 9, gravity: bool = False):
+    """Force field of the posture ``q_set`` in the sagittal (x, z) plane: the two ``joints`` are
+    swept ±``span`` rad around the set-point (the others held), and ``F`` from ``Jᵀ F = τ``
+    (least squares) is drawn at the hand (paper Section 2.2, frog-leg fields of Figure 2)."""
+    import matplotlib.pyplot as plt
+
+    q_set = np.asarray(q_set, float)
+    a = np.linspace(-span, span, n)
+    A, Bg = np.meshgrid(a, a, indexing="ij")
+    q = np.broadcast_to(q_set, A.shape + q_set.shape).copy()
+    q[..., joints[0]] += A
+    q[..., joints[1]] += Bg
+    x = np.asarray(chain.fk(q))
+    F = np.asarray(force_field(chain, q, q_set, K, gravity=gravity))
+    x0 = np.asarray(chain.fk(q_set))
+    fig, ax = plt.subplots(figsize=(5, 5))
+    ax.quiver(x[..., 0], x[..., 2], F[..., 0], F[..., 2], angles="xy")
+    ax.plot([x0[0]], [x0[2]], "ro", label="set-point posture")
+    ax.set_xlabel("x (forward) [m]")
+    ax.set_ylabel("z (up) [m]")
+    ax.set_aspect("equal")
+    ax.legend(frameon=False)
+    return fig
