@@ -103,27 +103,27 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     Tb = int(n_ok.max())
     # replicate 0 is the data itself (valid trials first), so one compiled call does everything
     full = jnp.argsort(~jnp.asarray(trial_ok), axis=-1, stable=True)[None]
-    idx = jnp.concatenate([full, idx], axis=0)[..., :Tb]
+    # gather in NumPy: the index arithmetic would otherwise compile a kernel per shape
+    idx = np.asarray(jnp.concatenate([full, idx], axis=0)[..., :Tb])
     n_boot = n_boot + 1
 
     def take(a):
-        a = jnp.asarray(a)
+        a = np.asarray(a)
         rest = a.shape[len(batch) + 2:]
-        ab = jnp.broadcast_to(a, (n_boot,) + a.shape)
         ix = idx.reshape(idx.shape + (1,) * (1 + len(rest)))
-        g = jnp.take_along_axis(ab, ix, axis=len(batch) + 1)
+        g = np.take_along_axis(a[None], ix, axis=len(batch) + 1)
         return g.reshape((n_boot,) + batch + (Tb * S,) + rest)
 
     used = np.arange(Tb) < n_ok  # (..., Tb)
-    mk = np.asarray(take(mask)).reshape((n_boot,) + batch + (Tb, S)) & used[..., None]
+    mk = take(mask).reshape((n_boot,) + batch + (Tb, S)) & used[..., None]
     opts = {k: v for k, v in options.items() if k != "on_invalid"}
     res = estimate_ik_weights(take(qdot), take(xdot), take(J), on_invalid="flag",
                               mask=mk.reshape((n_boot,) + batch + (Tb * S,)), **opts)
     a = (1.0 - level) / 2.0
-    ws = res.w[1:]
-    lo = jnp.nanquantile(ws, a, axis=0)
-    hi = jnp.nanquantile(ws, 1.0 - a, axis=0)
-    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=ws, converged=res.converged[1:])
+    ws = np.asarray(res.w[1:])
+    lo = jnp.asarray(np.nanquantile(ws, a, axis=0))
+    hi = jnp.asarray(np.nanquantile(ws, 1.0 - a, axis=0))
+    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=jnp.asarray(ws), converged=res.converged[1:])
 
 
 @pytree_dataclass

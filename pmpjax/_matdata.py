@@ -22,6 +22,7 @@ import os
 from importlib import resources
 from pathlib import Path
 
+import jax
 import numpy as np
 
 _MAT73_HEADER = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: pmpjax HDF5 schema 1.00 ."
@@ -419,6 +420,18 @@ def motion_kinematics(q, chain, *, fs: float = 100.0, window: float = 0.15, samp
     return qs, qd, np.einsum("sij,sj->si", J, qd), J
 
 
+@jax.jit
+def _jac_soa(chain, qc):
+    return chain.fk_jac_soa(qc)[1]
+
+
+def _jacobians(chain, q):
+    """``chain.jacobian(q)`` (..., m, n) as a writable NumPy array, in one compiled call (eager
+    op-by-op evaluation compiles ~100 small kernels per new shape)."""
+    qc = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    return np.moveaxis(np.asarray(_jac_soa(chain, qc)), (0, 1), (-2, -1)).copy()
+
+
 def hugmp_arrays(subject: HugmpSubject, chain, *, samples: int = 100, window: float = 0.15):
     """Per task, pad the subject's motions into arrays for estimation.
 
@@ -435,7 +448,7 @@ def hugmp_arrays(subject: HugmpSubject, chain, *, samples: int = 100, window: fl
             sl = (t - 1, r - 1, i - 1)
             out["q"][sl], out["qdot"][sl] = _smooth(q, subject.fs, window, samples)
             out["mask"][sl] = True
-    J = np.array(chain.jacobian(out["q"]))
+    J = _jacobians(chain, out["q"])
     J[~out["mask"]] = np.eye(3, 4)
     out["J"] = J
     out["xdot"] = np.einsum("...ij,...j->...i", J, out["qdot"])

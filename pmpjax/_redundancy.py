@@ -10,6 +10,7 @@ are what integrators and fits call; the public functions take batch-leading arra
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from ._linalg import from_soa, mm, mv, spd_inv, spd_solve, to_soa
 
@@ -84,8 +85,15 @@ def _check_J(J):
 
 
 def _bcast(J, A):
-    batch = jnp.broadcast_shapes(J.shape[2:], A.shape[2:])
-    return jnp.broadcast_to(J, J.shape[:2] + batch), jnp.broadcast_to(A, A.shape[:2] + batch)
+    """Broadcast the trailing batch axes of component-leading ``J`` and ``A`` NumPy-style (the
+    batch axes were leading in the public arrays, so shorter batches are padded on their left)."""
+    batch = tuple(np.broadcast_shapes(J.shape[2:], A.shape[2:]))
+
+    def pad(X):
+        X = X.reshape(X.shape[:2] + (1,) * (len(batch) - (X.ndim - 2)) + X.shape[2:])
+        return jnp.broadcast_to(X, X.shape[:2] + batch)
+
+    return pad(J), pad(A)
 
 
 def weighted_pinv(J, W=None, *, w=None):

@@ -145,7 +145,8 @@ def test_grasp_holds_touched_posture(arm, free_arm, reflex_run, P):
     # (Residual ringing after ~1.9 s of settling at damping ratio ≈ 0.5: ~1e-4 rad.)
     assert np.abs(tr.qdot[g, k_rel - 1]).max() < 1e-2
     assert np.abs(tr.q[g, k_rel - 1] - np.asarray(eq.q[0])).max() < 2e-3
-    assert np.linalg.norm(tr.hand[g, k_rel - 1] - tr.hand[g, k_touch]) < 0.05  # within the sag
+    # The hand is where touched, lowered only by the static gravity sag at that posture.
+    assert np.linalg.norm(tr.hand[g, k_rel - 1] - np.asarray(eq.hand[0])) < 3e-3
     # Released: the next target (2.7 s, the "side" primitive) is followed again.
     assert np.abs(tr.q_set[g, -1] - held).max() > 0.05
 

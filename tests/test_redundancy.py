@@ -39,3 +39,14 @@ def test_diagonal_weights_and_batch(rng):
         pj.weighted_pinv(J[0])
     with pytest.raises(ValueError, match="`w`"):
         pj.weighted_pinv(J[0], w=np.ones(3))
+
+
+def test_batch_axes_broadcast_like_numpy(rng):
+    J = rng.normal(size=(4, 3, 2, 5))
+    W = np.stack([_spd(rng, 5) for _ in range(3)])  # batch (3,) against J's (4, 3)
+    out = np.asarray(pj.weighted_pinv(J, W))
+    assert out.shape == (4, 3, 5, 2)
+    np.testing.assert_allclose(out[2, 1], np.asarray(pj.weighted_pinv(J[2, 1], W[1])), rtol=1e-12)
+    w = rng.uniform(0.2, 1.0, size=5)  # unbatched diagonal weights against batched J
+    np.testing.assert_allclose(np.asarray(pj.nullspace_projector(J, w=w))[3, 0],
+                               np.asarray(pj.nullspace_projector(J[3, 0], np.diag(w))), atol=1e-12)
