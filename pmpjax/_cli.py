@@ -1,4 +1,9 @@
-"""Command line: ``python -m pmpjax [--out DIR]`` runs the main job on the embedded defaults."""
+"""Command line: ``python -m pmpjax [--out DIR] [--jobs ...]`` runs the main job on the embedded
+defaults: Figure 3 (λ0-PMP), Figure 4 (summed set-point moves), and every job registered by
+installed packages under the ``pmpjax.jobs`` entry-point group (``fitting`` registers the
+Donders/NIO fits and the IK weights of the bundled HuG-MP recordings). Plugins keep ``pmpjax``
+free of imports of ``fitting``. Each job is ``job(out: Path, log) -> dict`` (JSON-able).
+"""
 
 from __future__ import annotations
 
@@ -37,13 +42,37 @@ def _ends(data):
     return np.stack([data["targets"], np.zeros_like(data["targets"])], axis=1)
 
 
-JOBS = {"figure3": _figure3}
+def _figure4(out: Path, log) -> dict:
+    import numpy as np
+
+    from ._plots_primitives import plot_summed_moves
+    from ._primitives import moves_from_targets, summed_moves
+
+    # Williamson's Figure 4: a move 0 → 1 (1 s) with a second move to 1.5 issued half-way.
+    moves = moves_from_targets(np.zeros(1), np.array([[1.0], [1.5]]), np.array([0.0, 0.5]), 1.0)
+    t = np.linspace(0.0, 2.0, 401)
+    p, v = (np.asarray(a) for a in summed_moves(moves, np.zeros(1), t))
+    plot_summed_moves(moves, np.zeros(1), t).savefig(out / "figure4_summed_moves.png", dpi=120)
+    log(f"figure4: final set-point {p[-1, 0]:.6f}, figure -> {out / 'figure4_summed_moves.png'}")
+    return {"final_set_point": float(p[-1, 0]), "peak_velocity": float(v[:, 0].max()),
+            "velocity_jump_max": float(np.abs(np.diff(v[:, 0])).max())}
+
+
+def _jobs() -> dict:
+    """Built-in jobs, then entry points of the ``pmpjax.jobs`` group, in registration order."""
+    from importlib.metadata import entry_points
+
+    jobs = {"figure3": _figure3, "figure4": _figure4}
+    for ep in sorted(entry_points(group="pmpjax.jobs"), key=lambda e: e.name):
+        jobs.setdefault(ep.name, ep)
+    return jobs
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="pmpjax", description=__doc__)
     parser.add_argument("--out", default="out", help="output folder (created)")
-    parser.add_argument("--jobs", nargs="*", default=list(JOBS), choices=list(JOBS),
+    jobs = _jobs()
+    parser.add_argument("--jobs", nargs="*", default=list(jobs), choices=list(jobs),
                         help="which parts of the main job to run (default: all)")
     args = parser.parse_args(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
@@ -55,7 +84,11 @@ def main(argv=None) -> int:
     results_path = out / "results.json"
     results = json.loads(results_path.read_text()) if results_path.exists() else {}
     for name in args.jobs:
-        results[name] = JOBS[name](out, print)
+        job = jobs[name]
+        job = job.load() if hasattr(job, "load") else job
+        t0 = time.perf_counter()
+        results[name] = job(out, print)
+        results[name].setdefault("seconds", round(time.perf_counter() - t0, 2))
         # Written after every part so an interruption loses nothing already computed.
         results_path.write_text(json.dumps(results, indent=2))
     print(f"results -> {results_path}")
