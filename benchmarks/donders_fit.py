@@ -14,13 +14,16 @@ Latest figures (2026-11-22, 2-core CPU, no GPU; the machine was shared with othe
 jobs, load average 5–10, so absolute times are inflated ~2–4× and noisy; JAX: 2 starts per
 subject, chunks of 100 subjects; SciPy: 1 start)::
 
-    SciPy loop: 55.1 s/subject over 3 subjects (0.0181 subjects/s; time-boxed at 120 s)
+    SciPy loop: 55.1 s/subject over 3 subjects (0.0182 subjects/s; time-boxed at 120 s)
 
     subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
            1        23.1      0.50       499.6        2.00      110     1.000
           10        43.4      6.32       631.6        1.58       87     1.000
          100        55.7     89.88       898.8        1.11       61     0.990
-    ROW_1000
+        1000         0.0   1163.53      1163.5        0.86       47     0.993
+    (1000: compile 0.0 = the 100-subject chunk's executable reused)
+
+Target (>= 100x the SciPy loop at 1000 subjects) NOT met on this shared machine: 47x.
 
 Per-subject cost grows with the batch because a vmapped LM (and the vmapped Newton loop inside
 it) runs every lane until the slowest start of the chunk has finished (median ~15 LM steps,

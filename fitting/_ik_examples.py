@@ -13,28 +13,36 @@ IK model of Eq 15, so here ``ẋ_k ~ N(0, I)``, ``J_k ~ N(0, 1)``, ``ṽ_k ~ N(0
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-import pmpjax as pj
+from pmpjax._linalg import from_soa, mv, to_soa
+from pmpjax._redundancy import pinv_apply_diag_soa
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 
 
 def fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
     """Random data of Fig 1: returns ``qdot`` (R, K, n), ``xdot`` (R, K, m), ``J`` (R, K, m, n)."""
-    w_true = jnp.asarray(w_true, dtype=float)
+    return _fig1_data(key, jnp.asarray(w_true, dtype=float), jnp.asarray(sigma, dtype=float),
+                      n_reps=int(n_reps), K=int(K), m=int(m))
+
+
+@partial(jax.jit, static_argnames=("n_reps", "K", "m"))
+def _fig1_data(key, w_true, sigma, *, n_reps, K, m):
     n = w_true.shape[0]
     k1, k2, k3 = jax.random.split(key, 3)
     J = jax.random.normal(k1, (n_reps, K, m, n))
     xdot = jax.random.normal(k2, (n_reps, K, m))
     v = sigma * jax.random.normal(k3, (n_reps, K, n))
-    w = jnp.broadcast_to(w_true, (n_reps, K, n))
-    Jp = pj.weighted_pinv(J, w=w)
-    N = pj.nullspace_projector(J, w=w)
-    qdot = jnp.einsum("rkij,rkj->rki", Jp, xdot) + jnp.einsum("rkij,rkj->rki", N, v)
-    return qdot, xdot, J
+    # q̇ = J#_W ẋ + N_W ṽ = ṽ + J#_W (ẋ − J ṽ), through the one pseudo-inverse kernel
+    Jc, vc = to_soa(J, 2), to_soa(v)
+    a = jnp.broadcast_to((1.0 / w_true).reshape((n, 1, 1)), (n, n_reps, K))
+    qdot = vc + pinv_apply_diag_soa(Jc, a, to_soa(xdot) - mv(Jc, vc))[0]
+    return from_soa(qdot), xdot, J
 
 
 def fig3_data(*, w_true=(1.0, 0.01), k_task: float = 1.0, k_null: float = 1.0, dt: float = 0.1,
