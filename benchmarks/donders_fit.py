@@ -10,24 +10,30 @@ at the observed posture), same parameterisation and torsion residual, one start.
 
 Usage: ``python benchmarks/donders_fit.py [--sizes 1 10 100 1000] [--scipy-budget 240]``.
 
-Latest figures (2026-11-22, 2-core CPU, no GPU; the machine was shared with other engineers'
-jobs, load average 5–10, so absolute times are inflated ~2–4× and noisy; JAX: 2 starts per
-subject, chunks of 100 subjects; SciPy: 1 start)::
+Latest figures (2026-11-22, 2-core CPU, no GPU; shared with other engineers' jobs, load
+average 3–5 during the run; JAX: 2 starts per subject, chunks of 16 subjects; SciPy: 1 start;
+``--sizes 1 10 100 1000 --scipy-budget 60``)::
 
-    SciPy loop: 55.1 s/subject over 3 subjects (0.0182 subjects/s; time-boxed at 120 s)
+    SciPy loop: 60.1 s/subject over 2 subjects (0.0166 subjects/s; time-boxed at 60 s)
 
     subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
-           1        23.1      0.50       499.6        2.00      110     1.000
-          10        43.4      6.32       631.6        1.58       87     1.000
-         100        55.7     89.88       898.8        1.11       61     0.990
-        1000         0.0   1163.53      1163.5        0.86       47     0.993
-    (1000: compile 0.0 = the 100-subject chunk's executable reused)
+           1        20.2      0.39       388.4        2.57      155     1.000
+          10        27.8      2.80       280.3        3.57      214     1.000
+         100        30.3     39.70       397.0        2.52      151     0.990
+        1000         0.0    329.63       329.6        3.03      182     0.993
+    (1000: compile 0.0 = the 16-subject chunk's executable reused)
 
-Target (>= 100x the SciPy loop at 1000 subjects) NOT met on this shared machine: 47x.
+Target (>= 100x the SciPy loop at 1000 subjects) met: 182x. Before this revision (same machine,
+load 5–10, chunks of 100, LAPACK KKT solves): 1163.5 ms/subject at 1000 subjects, 47x.
 
-Per-subject cost grows with the batch because a vmapped LM (and the vmapped Newton loop inside
-it) runs every lane until the slowest start of the chunk has finished (median ~15 LM steps,
-slowest 30–100), and each Newton iteration solves a 5×5 KKT system by a per-item LAPACK LU.
+What changed: (1) the 5×5 indefinite KKT solves of the equilibrium Newton loop and of its
+implicit JVP (one per LM parameter tangent under ``jacfwd``) are an unrolled
+augmented-Lagrangian/LDLᵀ elimination (``pmpjax._equilibria._kkt_solve``) instead of a batched
+tiny LAPACK LU: equilibria + their Jacobian 1.75× faster; the factors depend on primals only
+and are shared by all tangents. (2) Chunks of 16 instead of 100 subjects: a vmapped LM (and the
+vmapped Newton loop inside it) runs every lane until the slowest start of its chunk finishes
+(median ~15 LM steps, slowest 30–100), so smaller chunks waste fewer lane-iterations while
+16 × 2 × 512 equilibria per Newton iteration still fill the vector units.
 """
 
 from __future__ import annotations
@@ -52,7 +58,7 @@ from fitting._donders import _fit_batch, _starts  # noqa: E402
 
 N_POST = 500
 N_STARTS = 2
-CHUNK = 100
+CHUNK = 16  # subjects per compiled call: small chunks waste less on the slowest lane (see below)
 
 
 def make_subjects(S, seed=0):
@@ -164,6 +170,7 @@ def main():
         "postures": N_POST,
         "n_starts_jax": N_STARTS,
         "chunk": CHUNK,
+        "load_average_start": os.getloadavg(),
         "jax": [],
         "scipy": None,
     }
@@ -210,6 +217,7 @@ def main():
             "subjects_per_s": rate,
             "speedup_vs_scipy": rate / sp_rate,
             "converged_fraction": float(np.mean(fit.converged)),
+            "load_average": os.getloadavg(),
         }
         results["jax"].append(row)
         dump()

@@ -27,9 +27,14 @@ def ik_decomposition(qdot, xdot, J, w):
     xdot = as_array("xdot", xdot, tail=(None, None))
     J = as_array("J", J, tail=(None, xdot.shape[-1], n))
     w = as_array("w", w, tail=(n,))
-    wk = jnp.broadcast_to(jnp.asarray(w)[..., None, :], tuple(J.shape[:-2]) + (n,))
-    task = jnp.einsum("...ij,...j->...i", pj.weighted_pinv(J, w=wk), jnp.asarray(xdot))
-    return task, jnp.asarray(qdot) - task
+    return _decompose(jnp.asarray(qdot), jnp.asarray(xdot), jnp.asarray(J), jnp.asarray(w))
+
+
+@jax.jit
+def _decompose(qdot, xdot, J, w):
+    wk = jnp.broadcast_to(w[..., None, :], J.shape[:-2] + w.shape[-1:])
+    task = jnp.einsum("...ij,...j->...i", pj.weighted_pinv(J, w=wk), xdot)
+    return task, qdot - task
 
 
 def contribution_coefficients(w):
@@ -77,9 +82,10 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
     ``qdot`` (..., T, S, n), ``xdot`` (..., T, S, m), ``J`` (..., T, S, m, n), ``mask`` (..., T, S)
-    (a trial with no valid sample is never drawn). The estimate on the data and all ``n_boot``
-    replicates of every item run in one vectorised :func:`estimate_ik_weights` call (``options``
-    are passed on; items with unusable data are flagged, giving NaN, rather than raising).
+    (a trial with no valid sample is never drawn); ``key`` (a JAX PRNG key, default
+    ``PRNGKey(0)``) seeds the NumPy generator that draws the trials. The estimate on the data and
+    all ``n_boot`` replicates of every item run in one vectorised :func:`estimate_ik_weights` call
+    (``options`` are passed on; items with unusable data are flagged, giving NaN, not raising).
     """
     qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
     xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
@@ -95,16 +101,18 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     if mask.shape != batch + (T, S):
         raise ValueError(f"`mask` must have shape {batch + (T, S)}, got {mask.shape}")
     trial_ok = mask.any(-1)  # (..., T)
-    logits = jnp.where(jnp.asarray(trial_ok), 0.0, -jnp.inf)[..., None, :]  # (..., 1, T)
-    logits = jnp.broadcast_to(logits, batch + (T, T))
-    idx = jax.random.categorical(key, logits, axis=-1, shape=(n_boot,) + batch + (T,))
-    # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest
     n_ok = trial_ok.sum(-1)[..., None]  # (..., 1)
+    # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest
     Tb = int(n_ok.max())
     # replicate 0 is the data itself (valid trials first), so one compiled call does everything
-    full = jnp.argsort(~jnp.asarray(trial_ok), axis=-1, stable=True)[None]
-    # gather in NumPy: the index arithmetic would otherwise compile a kernel per shape
-    idx = np.asarray(jnp.concatenate([full, idx], axis=0)[..., :Tb])
+    order = np.argsort(~trial_ok, axis=-1, kind="stable")  # (..., T) valid trials first
+    # draws uniform among an item's valid trials, in NumPy seeded by `key` (a JAX categorical
+    # draw compiles for seconds per shape)
+    kd = np.asarray(key if np.asarray(key).dtype == np.uint32 else jax.random.key_data(key))
+    rng = np.random.default_rng([int(v) for v in kd.ravel()])
+    pick = np.floor(rng.random((n_boot,) + batch + (Tb,)) * np.maximum(n_ok, 1)).astype(int)
+    boot = np.take_along_axis(np.broadcast_to(order, (n_boot,) + order.shape), pick, axis=-1)
+    idx = np.concatenate([order[None, ..., :Tb], boot], axis=0)
     n_boot = n_boot + 1
 
     def take(a):

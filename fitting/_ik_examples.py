@@ -34,10 +34,11 @@ def fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3
 @partial(jax.jit, static_argnames=("n_reps", "K", "m"))
 def _fig1_data(key, w_true, sigma, *, n_reps, K, m):
     n = w_true.shape[0]
-    k1, k2, k3 = jax.random.split(key, 3)
-    J = jax.random.normal(k1, (n_reps, K, m, n))
-    xdot = jax.random.normal(k2, (n_reps, K, m))
-    v = sigma * jax.random.normal(k3, (n_reps, K, n))
+    # one draw, split into J, ẋ and ṽ (three separate draws take seconds to compile)
+    z = jax.random.normal(key, (n_reps, K, m * n + m + n))
+    J = z[..., : m * n].reshape(n_reps, K, m, n)
+    xdot = z[..., m * n : m * n + m]
+    v = sigma * z[..., m * n + m :]
     # q̇ = J#_W ẋ + N_W ṽ = ṽ + J#_W (ẋ − J ṽ), through the one pseudo-inverse kernel
     Jc, vc = to_soa(J, 2), to_soa(v)
     a = jnp.broadcast_to((1.0 / w_true).reshape((n, 1, 1)), (n, n_reps, K))

@@ -144,11 +144,13 @@ def _fixed_mask(fixed, n):
 
 # ---------------------------------------------------------------------------------------------
 # kernels (component-leading: vectors (n, C, K), weights (n, C, 1); C items of one chunk, K samples
-# contiguous). One Algorithm-1 iteration is one pass over the samples: the solves, the error and
-# all 51 sums over k (error, Σ v̄ q̇ᵀ, Σ ū q̇ᵀ) fuse into a single loop (a variadic reduce), and
-# the items are processed in cache-sized chunks, each iterating until its own items stop.
+# contiguous; elementwise, no per-sample matmuls). Per iteration the per-sample solves are a few
+# fused elementwise loops and the error plus all 2n² sums over k (Σ v̄ q̇ᵀ, Σ ū q̇ᵀ) one variadic
+# reduce (one pass, not 51). J q̇ and Q̇ Q̇ᵀ are computed once. Large problems run in cache-sized
+# chunks of items (lax.map), each chunk iterating until its own items stop.
 
 _CHUNK_SAMPLES = 25_000  # items × samples per chunk (≈ 6 MB of inputs; measured best on this CPU)
+_DIRECT_SAMPLES = 150_000  # up to this many items × samples: no chunking
 
 
 def _evaluate(w, Jc, xd, Jq):
@@ -160,12 +162,12 @@ def _evaluate(w, Jc, xd, Jq):
 def _sample_sums(e, Vn, u, q):
     """``Σ_k e_k`` (C,) and ``Σ_k v̄_ik q̇_jk``, ``Σ_k ū_ik q̇_jk`` (n, n, C) in one fused pass."""
     n = len(q)
-    ops = [e] + [Vn[i] * q[j] for i in range(n) for j in range(n)] + [u[i] * q[j] for i in range(n) for j in range(n)]
+    ops = [e] + [a[i] * q[j] for a in (Vn, u) for i in range(n) for j in range(n)]
     zero = jnp.zeros((), e.dtype)
     out = lax.reduce(ops, [zero] * len(ops), lambda a, b: [x + y for x, y in zip(a, b)], (e.ndim - 1,))
-    S = jnp.stack(out[1:1 + n * n]).reshape((n, n) + e.shape[:-1])
-    O = jnp.stack(out[1 + n * n:]).reshape((n, n) + e.shape[:-1])
-    return out[0], S, O
+    S = jnp.stack(out[1 : 1 + n * n]).reshape((n, n) + e.shape[:-1])
+    omega = jnp.stack(out[1 + n * n :]).reshape((n, n) + e.shape[:-1])
+    return out[0], S, omega
 
 
 def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
@@ -181,6 +183,7 @@ def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
     return jnp.where(free, wn / top, 1.0)
 
 
+@jax.jit
 def qp_matrices(psi, omega):
     """Algorithm 1 lines 16–19: ``Ψ̃`` (n², n), ``Ω̃`` (n²,), ``H = Ψ̃ᵀΨ̃``, ``F = −Ω̃ᵀΨ̃``.
 
@@ -193,6 +196,7 @@ def qp_matrices(psi, omega):
     return Pt, Ot, Pt.T @ Pt, -(Ot @ Pt)
 
 
+@jax.jit
 def box_qp_update(psi, omega, *, w_min=1e-3, w_prev=None):
     """Closed-form minimiser of Eq 24 on ``[w_min, 1]ⁿ`` (before normalisation), ``psi`` (..., n, n)."""
     psi, omega = jnp.asarray(psi), jnp.asarray(omega)
@@ -269,7 +273,7 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
 def _algorithm1(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter, fixed, chunk):
     """All items, batch flattened: ``qdot`` (B, K, n), ``xdot`` (B, K, m), ``J`` (B, K, m, n),
     ``mask`` (B, K), ``gamma0`` (B,). Items are padded to whole chunks of ``chunk`` (padding has no
-    valid sample, so it stops at once). Returns w (n, B), err, hist (max_iter, B), …"""
+    valid sample, so it stops at once). Returns w (B, n), err (B,), hist (B, max_iter), …"""
     B0 = qdot.shape[0]
     pad = -B0 % chunk
     if pad:
@@ -280,18 +284,23 @@ def _algorithm1(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, 
     run = partial(_algorithm1_chunk, rate=rate, w_min=w_min, w_max=w_max, tol=tol,
                   step_tol=step_tol, max_iter=max_iter, fixed=fixed)
     if chunk >= B:
-        return tuple(a[..., :B0] for a in run(qd, xd, Jc, valid, gamma0))
+        return _items_first(run(qd, xd, Jc, valid, gamma0), B0)
     nc = B // chunk
 
     def split(a, ax):  # (…, B, …) -> (nc, …, chunk, …)
         return jnp.moveaxis(a.reshape(a.shape[:ax] + (nc, chunk) + a.shape[ax + 1:]), ax, 0)
 
-    def join(a):  # (nc, …, chunk) -> (…, B0)
-        return jnp.moveaxis(a, 0, -2).reshape(a.shape[1:-1] + (B,))[..., :B0]
+    def join(a):  # (nc, …, chunk) -> (…, B)
+        return jnp.moveaxis(a, 0, -2).reshape(a.shape[1:-1] + (B,))
 
     out = lax.map(lambda c: run(*c), (split(qd, 1), split(xd, 1), split(Jc, 2), split(valid, 0),
                                       split(gamma0, 0)))
-    return tuple(join(a) for a in out)
+    return _items_first(tuple(join(a) for a in out), B0)
+
+
+def _items_first(out, B0):
+    """(…, B) -> (B0, …): drop the padding items, put the item axis first."""
+    return tuple(jnp.moveaxis(a[..., :B0], -1, 0) for a in out)
 
 
 def _prepare(qdot, xdot, J, mask):
@@ -383,20 +392,20 @@ def estimate_ik_weights(
         raise ValueError(f"`gamma` must be a scalar or broadcast to the batch shape {batch}, got {g.shape}")
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    chunk = max(1, min(B, _CHUNK_SAMPLES // max(K, 1)))
+    # small problems in one piece (compiles faster), large ones in cache-sized chunks of items
+    chunk = B if B * K <= _DIRECT_SAMPLES else max(1, min(B, _CHUNK_SAMPLES // max(K, 1)))
     flat = lambda a, k: a.reshape((B,) + a.shape[a.ndim - k:])  # noqa: E731
     mf = np.ones((B, K), bool) if mask is None else mask.reshape(B, K)
     gf = jnp.broadcast_to(g, batch).reshape(B)
     w, err, hist, iters, conv, gam, fin = _algorithm1(
-        flat(qdot, 2), flat(xdot, 2), flat(J, 3), mf, gf, jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
+        flat(qdot, 2), flat(xdot, 2), flat(J, 3), mf, gf,
+        jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
         jnp.asarray(float(w_min)), jnp.asarray(np.inf if w_max is None else float(w_max)),
         jnp.asarray(float(tol)), jnp.asarray(float(step_tol)),
         max_iter=int(max_iter), fixed=fixed_t, chunk=chunk,
     )
-    unflat = lambda a: a.reshape(a.shape[:-1] + batch)  # noqa: E731
+    unflat = lambda a: a.reshape(batch + a.shape[1:])  # noqa: E731
     w, err, hist, iters, conv, gam, fin = (unflat(a) for a in (w, err, hist, iters, conv, gam, fin))
-    w = jnp.moveaxis(w, 0, -1)
-    hist = jnp.moveaxis(hist, 0, -1)
     status = jnp.where(fin, OK, NONFINITE)
     if flags is not None and flags.any():
         fl = jnp.asarray(flags)

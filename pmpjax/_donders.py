@@ -141,7 +141,9 @@ def plot_donders(r=None, surfaces=(), *, labels=None, ax=None, extent=np.deg2rad
     if r is not None:
         r = np.asarray(r)
         ax.scatter(deg(r[..., 1]), deg(r[..., 2]), deg(r[..., 0]), s=4, alpha=0.5, label="data")
-    if isinstance(surfaces, DondersSurface) or np.ndim(surfaces) == 1:
+    if isinstance(surfaces, DondersSurface) or (
+        not isinstance(surfaces, list | tuple) and np.ndim(surfaces) == 1
+    ):
         surfaces = [surfaces]
     for i, s in enumerate(surfaces):
         ry, rz, rx = (np.asarray(a) for a in surface_grid(s, extent=extent, n=n))

@@ -13,8 +13,8 @@ theorem (``jax.custom_jvp``: one extra KKT solve per tangent; forward and revers
 Initial guess (default ``q_init = q_rest``, ``λ = 0``): the first Newton step is then the
 ``KJ``-weighted projection of ``q_rest`` onto the linearised constraint, which is the exact answer
 for a linear chain; curvature corrections converge quadratically. Steps are capped at 0.5 rad
-(infinity norm). The KKT matrix ``[[H, −Jᵀ], [J, 0]]`` is indefinite, so it is solved by pivoted
-LU (``jnp.linalg.solve``); ``converged`` additionally requires a strict local minimum (reduced
+(infinity norm). The KKT matrix ``[[H, −Jᵀ], [J, 0]]`` is indefinite; it is solved by
+augmented-Lagrangian elimination with unrolled LDLᵀ factors (``_kkt_solve``); ``converged`` additionally requires a strict local minimum (reduced
 Hessian positive definite), so a saddle or maximum of the energy along the task manifold is
 flagged. Pass ``q_init`` (e.g. an observed posture, or the end of a λ0-PMP run) to start
 elsewhere: the solution is then the local minimum nearest along Newton's path.
@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._kinematics import Chain
+from ._linalg import spd_solve
 from ._pytree import pytree_dataclass
 from ._validate import as_array, check_positive, check_spd
 
@@ -62,9 +63,29 @@ def _lagrangian_hessian(chain, K, q, lam):
     return K - jax.jacfwd(lambda qq: chain.fk_jac_soa(qq)[1].T @ lam)(q)
 
 
-def _kkt_matrix(H, J):
+def _kkt_solve(H, J, a, b):
+    """Solve the KKT system ``H dq − Jᵀ λ = a``, ``J dq = b`` for right-hand sides ``a`` (n, k),
+    ``b`` (m, k); returns ``(dq (n, k), λ (m, k))``.
+
+    Augmented-Lagrangian elimination instead of a pivoted LU of the indefinite (n+m)² matrix:
+    adding ``ρ Jᵀ (J dq − b) = 0`` to the first block row gives the equivalent system
+    ``M dq − Jᵀ λ = a + ρ Jᵀ b`` with ``M = H + ρ JᵀJ``, which is positive definite whenever the
+    reduced Hessian is (Debreu), so ``dq = u + V λ`` with ``u = M⁻¹ (a + ρ Jᵀ b)``,
+    ``V = M⁻¹ Jᵀ``, and ``(J V) λ = b − J u`` (m×m Schur complement). Both solves are the
+    unrolled LDLᵀ of :func:`pmpjax._linalg.spd_solve`: elementwise under ``vmap`` (XLA fuses
+    them; no batched tiny LAPACK calls), and the factorisation is computed once for all ``k``
+    columns — under ``jacfwd`` (a vmap over tangents) it depends on primals only and is shared
+    by every tangent. ``ρ = 10 m |H|_F / |J|_F²`` balances the two blocks of ``M``.
+    """
     m = J.shape[0]
-    return jnp.block([[H, -J.T], [J, jnp.zeros((m, m), H.dtype)]])
+    rho = 10.0 * m * jnp.sqrt(jnp.sum(H * H)) / jnp.maximum(jnp.sum(J * J), 1e-300)
+    M = (H + rho * (J.T @ J))[:, :, None]
+    # Two calls (not one on concatenated columns) keep the tangent-linear right-hand side apart
+    # from the primal-only ``Jᵀ`` (needed to transpose for reverse mode); XLA CSEs the factors.
+    V = spd_solve(M, J.T)
+    u = spd_solve(M, a + rho * (J.T @ b))
+    lam = spd_solve((J @ V)[:, :, None], b - J @ u)
+    return u + V @ lam, lam
 
 
 def _is_minimum(H, J):
@@ -75,14 +96,11 @@ def _is_minimum(H, J):
 
 
 def _newton(chain, K, qr, x, q0, tol, max_iter):
-    n = q0.shape[0]
-
     def step(q, lam):
         _, c, J = _residual(chain, K, qr, x, q, lam)
         H = _lagrangian_hessian(chain, K, q, lam)
         # Newton on (q, λ): H dq − Jᵀ λ_new = −KJ (q − q_rest),  J dq = −c.
-        sol = jnp.linalg.solve(_kkt_matrix(H, J), jnp.concatenate([-(K @ (q - qr)), -c]))
-        dq, lam_new = sol[:n], sol[n:]
+        dq, lam_new = (a[:, 0] for a in _kkt_solve(H, J, -(K @ (q - qr))[:, None], -c[:, None]))
         big = jnp.max(jnp.abs(dq))
         alpha = jnp.minimum(1.0, _STEP_CAP / jnp.where(big > 0, big, 1.0))
         return q + alpha * dq, lam + alpha * (lam_new - lam), big
@@ -114,9 +132,8 @@ def _solve_jvp(tol, max_iter, primals, tangents):
     _, (dg, dc, _) = jax.jvp(lambda ch, k, r, t: _residual(ch, k, r, t, q, lam), primals[:4], tangents[:4])
     _, _, J = _residual(chain, K, qr, x, q, lam)
     H = _lagrangian_hessian(chain, K, q, lam)
-    sol = jnp.linalg.solve(_kkt_matrix(H, J), -jnp.concatenate([dg, dc]))
-    n = q.shape[0]
-    return (q, lam), (sol[:n], sol[n:])
+    dq, dlam = _kkt_solve(H, J, -dg[:, None], -dc[:, None])
+    return (q, lam), (dq[:, 0], dlam[:, 0])
 
 
 def equilibrium_one(

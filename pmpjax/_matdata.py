@@ -18,6 +18,7 @@ arrays [deg] at 100 Hz.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from importlib import resources
 from pathlib import Path
@@ -391,15 +392,36 @@ def load_hugmp(subject, directory=None, *, min_samples: int = 20) -> HugmpSubjec
     return HugmpSubject(subject=name, motions=motions, skipped=skipped, notes=notes)
 
 
-def _smooth(q, fs, window, samples):
-    from scipy.signal import savgol_filter
+@functools.lru_cache(maxsize=32)
+def _savgol_operators(win, deriv, delta):
+    """Cubic Savitzky–Golay filter of length ``win`` (SciPy's ``mode='interp'``) as linear maps:
+    interior coefficients, and the edge maps (half, win) of the polynomial fits to the first and
+    last ``win`` samples (the same for every signal, so fitted once instead of per motion)."""
+    from scipy.signal import savgol_coeffs, savgol_filter
 
+    edges = savgol_filter(np.eye(win), win, 3, deriv=deriv, delta=delta, axis=0, mode="interp")
+    half = win // 2
+    return savgol_coeffs(win, 3, deriv=deriv, delta=delta), edges[:half], edges[win - half:]
+
+
+def _savgol(q, win, deriv, delta):
+    """``scipy.signal.savgol_filter(q, win, 3, deriv, delta, axis=0)`` (mode 'interp') of (N, d) ``q``."""
+    from scipy.ndimage import convolve1d
+
+    coeffs, head, tail = _savgol_operators(win, deriv, delta)
+    y = convolve1d(q, coeffs, axis=0, mode="constant")
+    half = win // 2
+    y[:half] = head @ q[:win]
+    y[q.shape[0] - half:] = tail @ q[q.shape[0] - win:]
+    return y
+
+
+def _smooth(q, fs, window, samples):
     q = np.asarray(q, dtype=float)
     win = max(5, int(round(window * fs)) | 1)
     if q.shape[0] < win:
         raise ValueError(f"`q` has {q.shape[0]} samples, fewer than the smoothing window ({win})")
-    qs = savgol_filter(q, win, 3, axis=0)
-    qd = savgol_filter(q, win, 3, deriv=1, delta=1.0 / fs, axis=0)
+    qs, qd = _savgol(q, win, 0, 1.0), _savgol(q, win, 1, 1.0 / fs)
     if samples is not None:
         t0 = np.linspace(0.0, 1.0, q.shape[0])
         t1 = np.linspace(0.0, 1.0, samples)
@@ -428,8 +450,14 @@ def _jac_soa(chain, qc):
 def _jacobians(chain, q):
     """``chain.jacobian(q)`` (..., m, n) as a writable NumPy array, in one compiled call (eager
     op-by-op evaluation compiles ~100 small kernels per new shape)."""
-    qc = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.moveaxis(np.asarray(_jac_soa(chain, qc)), (0, 1), (-2, -1)).copy()
+    q = np.asarray(q, dtype=float)
+    flat = q.reshape(-1, q.shape[-1])
+    # pad the sample count to a power of two so that subjects of similar size share one compile
+    N = flat.shape[0]
+    P = max(1024, 1 << (N - 1).bit_length())
+    qc = np.concatenate([flat, np.zeros((P - N, q.shape[-1]))]).T
+    J = np.asarray(_jac_soa(chain, qc))[..., :N]
+    return np.moveaxis(J, (0, 1), (-2, -1)).reshape(q.shape[:-1] + J.shape[:2]).copy()
 
 
 def hugmp_arrays(subject: HugmpSubject, chain, *, samples: int = 100, window: float = 0.15):
