@@ -1,19 +1,11 @@
 """fitting: batched, differentiable parameter fits built on pmpjax (never imported by pmpjax)."""
 
-from ._optimise import LeastSquaresResult as LeastSquaresResult
-from ._optimise import covariance as covariance
-from ._optimise import least_squares as least_squares
 from ._donders import DondersFit as DondersFit
 from ._donders import fit_donders as fit_donders
 from ._donders import parameter_names as parameter_names
 from ._donders import params_from_stiffness as params_from_stiffness
 from ._donders import predicted_torsion as predicted_torsion
 from ._donders import stiffness_from_params as stiffness_from_params
-from ._ik_weights import IKWeightsLMResult as IKWeightsLMResult
-from ._ik_weights import IKWeightsResult as IKWeightsResult
-from ._ik_weights import estimate_ik_weights as estimate_ik_weights
-from ._ik_weights import estimate_ik_weights_lm as estimate_ik_weights_lm
-from ._ik_weights import ik_model_error as ik_model_error
 from ._ik_analysis import BootstrapResult as BootstrapResult
 from ._ik_analysis import HotellingResult as HotellingResult
 from ._ik_analysis import bootstrap_ik_weights as bootstrap_ik_weights
@@ -27,6 +19,14 @@ from ._ik_data import synthetic_ik_dataset as synthetic_ik_dataset
 from ._ik_examples import ik_fig1_data as ik_fig1_data
 from ._ik_examples import ik_fig3_data as ik_fig3_data
 from ._ik_plots import plot_ik_weights as plot_ik_weights
+from ._ik_weights import IKWeightsLMResult as IKWeightsLMResult
+from ._ik_weights import IKWeightsResult as IKWeightsResult
+from ._ik_weights import estimate_ik_weights as estimate_ik_weights
+from ._ik_weights import estimate_ik_weights_lm as estimate_ik_weights_lm
+from ._ik_weights import ik_model_error as ik_model_error
+from ._optimise import LeastSquaresResult as LeastSquaresResult
+from ._optimise import covariance as covariance
+from ._optimise import least_squares as least_squares
 from ._primitives_fit import BlendFit as BlendFit
 from ._primitives_fit import StiffnessFit as StiffnessFit
 from ._primitives_fit import fit_blend_weights as fit_blend_weights

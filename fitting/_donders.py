@@ -271,8 +271,9 @@ def fit_donders(
     - ``residual``: "torsion" (wrist default) or "joint" (any chain) — see module docstring.
     - ``max_steps``: LM iterations per start; ``rcond``: identifiability threshold on singular
       values relative to the largest; ``tol``: equilibrium Newton tolerance.
-    - ``chunk_size``: subjects per compiled call (default: all at once); chunks reuse one
-      compilation, and ``callback(start, partial_fit)`` is called after each chunk (write results
+    - ``chunk_size``: subjects per compiled call (default: 8 for up to 8 subjects, else 16 —
+      a vmapped LM runs every lane until the chunk's slowest start has finished, so small chunks
+      are faster per subject; see benchmarks/donders_fit.py); chunks reuse one compilation, and ``callback(start, partial_fit)`` is called after each chunk (write results
       as they go).
 
     All subjects of a chunk, and all their starts, run in one ``jit``+``vmap`` call. A subject
@@ -323,9 +324,9 @@ def fit_donders(
         raise ValueError(f"`trace` must be positive, got {trace}")
     if chunk_size is not None and (int(chunk_size) != chunk_size or chunk_size < 1):
         raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size}")
-    # Compiled shapes are bucketed (subjects per call: power of two >= 8 unless `chunk_size` is
-    # given; samples: power of two >= 64, padding masked out) so similar problems share a compile.
-    chunk = int(chunk_size) if chunk_size is not None else max(8, 1 << (S - 1).bit_length())
+    # Compiled shapes are bucketed (subjects per call: 8 or 16 unless `chunk_size` is given;
+    # samples: power of two >= 64, padding masked out) so similar problems share a compile.
+    chunk = int(chunk_size) if chunk_size is not None else (8 if S <= 8 else 16)
     Np = max(64, 1 << (N - 1).bit_length())
     if Np > N:
         pointing, postures = (

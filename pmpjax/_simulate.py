@@ -209,7 +209,6 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 @partial(jax.jit, static_argnames=("batch", "n_steps", "include_initial", "singular_tol"))
 def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initial, singular_tol):
     chain = model.chain
-    n, m = chain.n, chain.m
     B = math.prod(batch)
     core = {"W": 2, "KJ": 2, "q_rest": 1}
     model = replace(model, **{k: _flat(getattr(model, k), batch, c) for k, c in core.items()

@@ -1,13 +1,13 @@
 """λ0-PMP, PMP1, PMP2 on the wrist against SciPy (solve_ivp, SLSQP) and finite differences."""
 
 import jax
-from jax.flatten_util import ravel_pytree
 import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.integrate
 import scipy.optimize
 from _reference import arimoto, pmp_qdot, wrist_fk, wrist_jac
+from jax.flatten_util import ravel_pytree
 
 import pmpjax as pj
 
