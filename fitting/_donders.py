@@ -273,8 +273,8 @@ def fit_donders(
       values relative to the largest; ``tol``: equilibrium Newton tolerance.
     - ``chunk_size``: subjects per compiled call (default: 8 for up to 8 subjects, else 16 —
       a vmapped LM runs every lane until the chunk's slowest start has finished, so small chunks
-      are faster per subject; see benchmarks/donders_fit.py); chunks reuse one compilation, and ``callback(start, partial_fit)`` is called after each chunk (write results
-      as they go).
+      are faster per subject; see benchmarks/donders_fit.py); chunks reuse one compilation, and
+      ``callback(start, partial_fit)`` is called after each chunk (write results as they go).
 
     All subjects of a chunk, and all their starts, run in one ``jit``+``vmap`` call. A subject
     whose fit fails is reported with ``converged = False`` and a ``status`` code; the others are
