@@ -31,34 +31,29 @@ devices, either by passing ``NamedSharding``-ed ``q0``/``target`` to ``simulate`
 
 Run: ``python benchmarks/simulate.py`` (≈ 4–8 min) or ``--quick`` (smoke run, writes nothing).
 
-Results (2026-11-22, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, float64):
+Results (2026-11-22 10:20 UTC, quiet machine, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, float64):
 
 | implementation | B | save | compile [s] | time/call | steps/s | traj/s | xla mem | Δrss | maxrss |
 |---|---:|---|---:|---:|---:|---:|---:|---:|---:|
-| JAX simulate, 1 device | 1 | final | 0.23+1.34 | 2.02 ms (kernel 1.03) | 198 k | 496 | 6 kB | 52 kB | 677.3 MB |
-| JAX simulate, 1 device | 100 | final | 0.31+2.44 | 11.05 ms (kernel 9.42) | 3.62 M | 9.05 k | 71 kB | 104 kB | 677.3 MB |
-| JAX simulate, 1 device | 1000 | final | 0.23+2.44 | 147.34 ms (kernel 146.71) | 2.71 M | 6.79 k | 669 kB | 1.6 MB | 677.3 MB |
-| JAX simulate, 1 device | 10000 | final | 0.28+2.48 | 3036.77 ms (kernel 1385.17) | 1.32 M | 3.29 k | 6.5 MB | 6.6 MB | 677.3 MB |
-| JAX simulate, 1 device | 10000 | every10 | 0.62+7.97 | 2507.60 ms (kernel 2334.97) | 1.6 M | 3.99 k | 58.2 MB | 61.5 MB | 677.3 MB |
-| JAX simulate, taskset 1 core | 10000 | final | | 2210.3 ms (kernel 2167.0) | 1.81 M | | | | |
-| JAX simulate, 2 devices (shard_map) | 10000 | final | | 1488.9 ms (gspmd 2110, shard_map 1489) | 2.69 M | 6.72 k | | | |
-| C scalar loop (gcc -O3 -march=native), 1 core | 10000 | final | | 1851.1 ms | 2.16 M | 5.4 k | | | |
-| numba scalar loop, 1 core | 10000 | final | 2.79 | 2102.4 ms | 1.9 M | 4.76 k | | | |
-| SciPy solve_ivp DOP853 loop (rtol 1e-6) | 20 | final | | 813 ms | (249 evals/traj) | 24.6 | | | |
+| JAX simulate, 1 device | 1 | final | 0.19+0.91 | 1.94 ms (kernel 1.03) | 207 k | 517 | 6 kB | 48 kB | 759.7 MB |
+| JAX simulate, 1 device | 100 | final | 0.27+1.85 | 11.34 ms (kernel 9.60) | 3.53 M | 8.82 k | 71 kB | 112 kB | 759.7 MB |
+| JAX simulate, 1 device | 1000 | final | 0.29+1.95 | 100.44 ms (kernel 99.56) | 3.98 M | 9.96 k | 669 kB | 744 kB | 759.7 MB |
+| JAX simulate, 1 device | 10000 | final | 0.19+1.56 | 786.16 ms (kernel 732.52) | 5.09 M | 12.7 k | 6.5 MB | 6.4 MB | 759.7 MB |
+| JAX simulate, 1 device | 10000 | every10 | 0.63+3.20 | 734.01 ms (kernel 722.72) | 5.45 M | 13.6 k | 58.2 MB | 61.2 MB | 759.7 MB |
+| JAX simulate, taskset 1 core | 10000 | final | | 1063.8 ms (kernel 1067.6) | 3.76 M | | | | |
+| JAX simulate, 2 devices (gspmd) | 10000 | final | | 505.1 ms (gspmd 505, shard_map 534) | 7.92 M | 19.8 k | | | |
+| C scalar loop (gcc -O3 -march=native), 1 core | 10000 | final | | 958.4 ms | 4.17 M | 10.4 k | | | |
+| numba scalar loop, 1 core | 10000 | final | 1.90 | 1022.0 ms | 3.91 M | 9.78 k | | | |
+| SciPy solve_ivp DOP853 loop (rtol 1e-6) | 20 | final | | 196 ms | (249 evals/traj) | 102 | | | |
 
 Agreement of final postures with JAX (max |Δq| [rad]): scipy 1.1e-08, c 1.4e-16, numba 1.5e-16, 2-device 0.0e+00; closed-form vs generator-form Jacobian 1.1e-16.
-Ratios at B = 10000: JAX/SciPy trajectories/s = 134× (target ≥ 100×); JAX/C steps/s: 1 device 0.61, pinned 1 core 0.84, 2 devices 1.24 (target ≥ 0.5). Load average 6.3 → 8.2.
+Ratios at B = 10000: JAX/SciPy trajectories/s = 125× (target ≥ 100×); JAX/C steps/s: 1 device 1.22, pinned 1 core 0.90, 2 devices 1.90 (target ≥ 0.5). Load average 2.1 → 1.6.
 
-Reading it: measured at 08:45 UTC on the pmpjax working tree of that time, on a machine shared with
-other engineers' test runs (load average 6–8 on 2 cores), so every time is an upper bound and rows
-measured seconds apart disagree by up to 2× (B = 10 000: the public call's best 3.0 s against the
-kernel's 1.4 s for the same computation). Per step, the kernel at B = 10 000 (2.9 M steps/s) is
-1.3× the C loop, the public call 0.6×; pinned to one core 0.84×; split over 2 devices 1.24×
-(``shard_map`` beat GSPMD-sharded inputs, 1.49 s vs 2.11 s). JAX/SciPy = 134× by the call time
-(SciPy here 25 trajectories/s; 45 on an idle machine per design §5). Saving every 10 steps costs
-58 MB of XLA buffers at B = 10 000 instead of 6.5 MB. ``maxrss`` (~680 MB) is the JAX runtime plus
-compilation, not the simulation. At B = 1 half the call is Python-side checks (2.0 vs 1.0 ms).
-"""
+Reading it: measured at 10:20 UTC with no other jobs on the machine (an earlier run at 08:45 under
+load 6–8 gave 134× SciPy and 0.61–1.3× C). At B = 10 000 one device runs 1.22× the C loop's
+steps/s (kernel 1.31×); pinned to one core 0.90×; split over the two cores 1.90×. SciPy does
+102 trajectories/s idle; JAX/SciPy = 125×. At B = 1 half of the 1.9 ms call is Python-side
+checks (kernel 1.0 ms). Saving every 10 steps costs 58 MB of XLA buffers instead of 6.5 MB.
 
 # ruff: noqa: E501  (the pasted result tables above)
 from __future__ import annotations
