@@ -37,7 +37,7 @@ import numpy as np
 from pmpjax._equilibria import equilibrium_one, equilibrium_posture
 from pmpjax._kinematics import Chain, Wrist
 from pmpjax._orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
-from pmpjax._validate import as_array
+from pmpjax._validate import as_array, check_finite_masked
 
 from ._optimise import covariance, least_squares
 
@@ -308,13 +308,7 @@ def fit_donders(
     if mask.shape != (S, N) or mask.dtype != bool:
         raise ValueError(f"`mask` must be a bool array of shape {(S, N)}, got {mask.dtype} {mask.shape}")
     for name, a in (("pointing", pointing), ("postures", postures)):
-        bad = mask & ~np.all(np.isfinite(a), axis=-1)
-        if bad.any():
-            s, i = np.argwhere(bad)[0]
-            raise ValueError(
-                f"`{name}` contains NaN or inf at {int(bad.sum())} valid sample(s); first: "
-                f"subject {s}, sample {i} (mask them out or drop them)"
-            )
+        check_finite_masked(name, a, mask)
     chain.check_target("pointing", pointing[mask])
     if int(n_starts) != n_starts or n_starts < 1:
         raise ValueError(f"`n_starts` must be a positive integer, got {n_starts}")

@@ -45,6 +45,7 @@ from ._orientation import (
     quat_from_matrix,
     wrist_rotation,
 )
+from ._validate import check_finite_masked
 
 FORMAT = "pmpjax donders v1"
 _QUAT_COLS = ("qw", "qx", "qy", "qz")
@@ -91,13 +92,7 @@ def _check_recording(rec: DondersRecording, where: str):
     if len(set(rec.subjects)) != S:
         raise ValueError(f"{where}: subject names must be unique, got {list(rec.subjects)}")
     for name, a in (("quat", quat), ("pointing", pointing)):
-        bad = mask & ~np.all(np.isfinite(a), axis=-1)
-        if bad.any():
-            s, i = np.argwhere(bad)[0]
-            raise ValueError(
-                f"{where}: `{name}` has NaN/inf ({int(bad.sum())} samples; first: subject "
-                f"{rec.subjects[s]!r}, sample {i})"
-            )
+        check_finite_masked(name, a, mask, labels=rec.subjects, where=where)
     norm = np.where(mask, np.linalg.norm(np.nan_to_num(quat), axis=-1), 1.0)
     if np.any(np.abs(norm - 1.0) > 1e-3):
         s, i = np.argwhere(np.abs(norm - 1.0) > 1e-3)[0]

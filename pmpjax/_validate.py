@@ -66,3 +66,17 @@ def check_positive(name: str, x: Any) -> None:
 
 def _fmt(tail: tuple[int | None, ...]) -> str:
     return "(..., " + ", ".join("?" if t is None else str(t) for t in tail) + ")"
+
+
+def check_finite_masked(name: str, a, mask, *, labels=None, where: str = "") -> None:
+    """Require ``a`` (S, N, k) finite wherever ``mask`` (S, N) is True; the error names ``name``,
+    the count and the first offending (subject, sample). ``labels`` name subjects (default index)."""
+    bad = np.asarray(mask) & ~np.all(np.isfinite(np.asarray(a)), axis=-1)
+    if bad.any():
+        s, i = np.argwhere(bad)[0]
+        subject = repr(labels[s]) if labels is not None else int(s)
+        prefix = f"{where}: " if where else ""
+        raise ValueError(
+            f"{prefix}`{name}` contains NaN or inf at {int(bad.sum())} valid sample(s); first: "
+            f"subject {subject}, sample {int(i)} (mask them out or drop them)"
+        )
