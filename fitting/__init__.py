@@ -1,6 +1,8 @@
 """fitting: batched, differentiable parameter fits built on pmpjax (never imported by pmpjax)."""
 
 from ._donders import DondersFit as DondersFit
+from ._donders import coefficient_names as coefficient_names
+from ._donders import donders_coefficients as donders_coefficients
 from ._donders import fit_donders as fit_donders
 from ._donders import parameter_names as parameter_names
 from ._donders import params_from_stiffness as params_from_stiffness
