@@ -21,10 +21,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from pmpjax._linalg import mv, to_soa
+from pmpjax._linalg import det, mv, to_soa
 from pmpjax._pytree import pytree_dataclass
-from pmpjax._redundancy import pinv_apply_diag_soa
+from pmpjax._redundancy import pinv_apply_diag_soa, pinv_diag_lists
 from pmpjax._validate import as_array, is_concrete
 
 from ._optimise import least_squares
@@ -84,35 +85,6 @@ def _check_inputs(qdot, xdot, J, mask):
     return qdot, xdot, J, mask
 
 
-def _invalid_items(qdot, xdot, J, mask, rank_tol):
-    """Per-item reasons {batch index: message} for NaN/inf velocities or rank-deficient ``J``."""
-    q, x, Jn = (np.asarray(a, dtype=float) for a in (qdot, xdot, J))
-    batch, K = q.shape[:-2], q.shape[-2]
-    B = int(np.prod(batch)) if batch else 1
-    n, m = q.shape[-1], x.shape[-1]
-    q, x, Jn = q.reshape(B, K, n), x.reshape(B, K, m), Jn.reshape(B, K, m, n)
-    valid = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
-    bad = {}
-
-    def add(flat_items, msg):
-        for b in np.nonzero(flat_items)[0]:
-            idx = tuple(int(i) for i in np.unravel_index(b, batch)) if batch else ()
-            bad.setdefault(idx, msg(b))
-
-    for name, a in (("qdot", q), ("xdot", x), ("J", Jn)):
-        nonfin = ~np.all(np.isfinite(a.reshape(B, K, -1)), axis=-1) & valid
-        add(nonfin.any(-1), lambda b, name=name: f"`{name}` contains NaN or inf")
-    Jz = np.nan_to_num(Jn)
-    JJ = np.einsum("bkij,bklj->bkil", Jz, Jz)
-    tr = np.trace(JJ, axis1=-2, axis2=-1) / m
-    # det(JJᵀ)/(tr/m)^m ≤ λ_min/λ_mean: a scale-free test for a rank-deficient Jacobian
-    ratio = np.linalg.det(JJ) / np.where(tr > 0, tr, 1.0) ** m
-    sing = ((ratio <= rank_tol) | (tr <= 0)) & valid
-    add(sing.any(-1), lambda b: f"`J` is rank-deficient (rank < m) at sample {int(np.argmax(sing[b]))}")
-    add(valid.sum(-1) == 0, lambda b: "`mask` leaves no valid sample")
-    return bad
-
-
 def _check_gamma(gamma, gamma_rate):
     if is_concrete(gamma):
         g = np.asarray(gamma, dtype=float)
@@ -143,31 +115,38 @@ def _fixed_mask(fixed, n):
 
 
 # ---------------------------------------------------------------------------------------------
-# kernels (component-leading: vectors (n, C, K), weights (n, C, 1); C items of one chunk, K samples
-# contiguous; elementwise, no per-sample matmuls). Per iteration the per-sample solves are a few
-# fused elementwise loops and the error plus all 2n² sums over k (Σ v̄ q̇ᵀ, Σ ū q̇ᵀ) one variadic
-# reduce (one pass, not 51). J q̇ and Q̇ Q̇ᵀ are computed once. Large problems run in cache-sized
-# chunks of items (lax.map), each chunk iterating until its own items stop.
+# kernels (component-leading element lists: vectors are lists of (C, K) arrays, weights (n, C, 1);
+# C items of one chunk, K samples contiguous; elementwise, no per-sample matmuls). An iteration is
+# ONE fused pass over the samples: the two weighted pseudo-inverse solves (this iteration's weights
+# and, for the error, the previous ones — recomputed rather than carried, since writing v̄ out
+# would split the pass), the error and all 2n² sums over k (Σ v̄ q̇ᵀ, Σ ū q̇ᵀ) in one variadic
+# reduce; the 3 × 3 solve is the adjugate (one division, see ``spd_solve_lists``), which XLA:CPU
+# keeps inside the fused loop (an LDLᵀ's divisions each cut it: 2× slower). J q̇ and Q̇ Q̇ᵀ are
+# computed once. Large problems run in cache-sized chunks of items (lax.map), each chunk iterating
+# until its own items stop; with several devices the items are split over them first (shard_map).
 
 _CHUNK_SAMPLES = 25_000  # items × samples per chunk (≈ 6 MB of inputs; measured best on this CPU)
-_DIRECT_SAMPLES = 150_000  # up to this many items × samples: no chunking
+_DIRECT_SAMPLES = 150_000  # up to this many items × samples (per device): no chunking
+# The sample sums may be reassociated (NaN/inf/division/sqrt semantics kept): XLA:CPU then
+# vectorises the reductions over k, which it does not do in strict IEEE order (3.8× for the
+# whole kernel: 0.23 s instead of 0.86 s for the 1 000-subject benchmark). Results differ from a
+# strict left-to-right summation only by rounding (≈ 1e-16 relative per sum; after 50 iterations
+# the weights of the Fig 1 data agree with the strict-order ones to 2e-13 for 99 % of subjects,
+# 2e-11 for the worst-conditioned one, whose float64 baseline is itself 6e-9 from an
+# extended-precision computation).
+_FAST_SUMS = {
+    "xla_cpu_enable_fast_math": True,
+    "xla_cpu_fast_math_honor_nans": True,
+    "xla_cpu_fast_math_honor_infs": True,
+    "xla_cpu_fast_math_honor_division": True,
+    "xla_cpu_fast_math_honor_functions": True,
+}
 
 
-def _evaluate(w, Jc, xd, Jq):
-    """``J# ẋ`` and ``J# J q̇`` (n, C, K) through the one redundancy kernel (Eq 4)."""
-    task, proj = pinv_apply_diag_soa(Jc, 1.0 / w, xd, Jq)  # J# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹
-    return task, proj
-
-
-def _sample_sums(e, Vn, u, q):
-    """``Σ_k e_k`` (C,) and ``Σ_k v̄_ik q̇_jk``, ``Σ_k ū_ik q̇_jk`` (n, n, C) in one fused pass."""
-    n = len(q)
-    ops = [e] + [a[i] * q[j] for a in (Vn, u) for i in range(n) for j in range(n)]
-    zero = jnp.zeros((), e.dtype)
-    out = lax.reduce(ops, [zero] * len(ops), lambda a, b: [x + y for x, y in zip(a, b)], (e.ndim - 1,))
-    S = jnp.stack(out[1 : 1 + n * n]).reshape((n, n) + e.shape[:-1])
-    omega = jnp.stack(out[1 + n * n :]).reshape((n, n) + e.shape[:-1])
-    return out[0], S, omega
+def _sample_sums(ops):
+    """``Σ_k`` of every (C, K) array in ``ops`` -> list of (C,), in one fused pass."""
+    zero = jnp.zeros((), ops[0].dtype)
+    return lax.reduce(ops, [zero] * len(ops), lambda a, b: [x + y for x, y in zip(a, b)], (1,))
 
 
 def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
@@ -209,26 +188,37 @@ def box_qp_update(psi, omega, *, w_min=1e-3, w_prev=None):
 
 def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, max_iter, fixed):
     """Algorithm 1 on one chunk: ``qd`` (n, C, K), ``xd`` (m, C, K), ``Jc`` (m, n, C, K),
-    ``valid`` (C, K), ``gamma0`` (C,). Iterates until every item of the chunk has stopped."""
+    ``valid`` (C, K), ``gamma0`` (C,). Iterates until every item of the chunk has stopped.
+    Masked samples hold q̇ = ẋ = 0 and a full-rank J (see :func:`_prepare`), so they add exactly
+    0 to every sum below."""
     n, C = qd.shape[:2]
-    vf = valid.astype(qd.dtype)
-    count = jnp.sum(vf, axis=-1)
+    m = xd.shape[0]
+    count = jnp.sum(valid.astype(qd.dtype), axis=-1)
     q = [qd[i] for i in range(n)]
-    # loop invariants, computed once: J q̇ (m, C, K) and Q̇ Q̇ᵀ (n, n, C)
-    Jq = mv(Jc, qd)
-    qqT = jnp.stack([jnp.stack([jnp.sum(q[i] * q[j], axis=-1) for j in range(n)]) for i in range(n)])
+    x = [xd[r] for r in range(m)]
+    Jl = [[Jc[r, i] for i in range(n)] for r in range(m)]
+    # loop invariants, computed once: J q̇ (m × (C, K)) and Q̇ Q̇ᵀ (n, n, C)
+    Jq = [sum(Jl[r][i] * q[i] for i in range(n)) for r in range(m)]
+    qq = _sample_sums([q[i] * q[j] for i in range(n) for j in range(n)])
+    qqT = jnp.stack(qq).reshape((n, n, C))
 
     def body(s):
-        w, V, g = s["w"], s["V"], s["gamma"]
-        task, proj = _evaluate(w, Jc, xd, Jq)
+        w, g = s["w"], s["gamma"]
+        # J# ẋ and J# J q̇ through the one weighted pseudo-inverse (Eq 4), J# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹
+        task, proj = pinv_diag_lists(Jl, [1.0 / w[i] for i in range(n)], x, Jq)
+        # the previous iteration's null-space estimate v̄ = γ (I − J# J) q̇ is recomputed from its
+        # weights, not carried: the whole iteration is then one fused pass over the samples
+        (proj_p,) = pinv_diag_lists(Jl, [1.0 / s["w_prev"][i] for i in range(n)], Jq)
+        g_p = s["gamma_prev"][:, None]
         # Algorithm 1 lines 7–8: error with the null-space estimate of the previous iteration
-        res = [q[i] - task[i] - V[i] for i in range(n)]
-        e = jnp.sqrt(sum(r * r for r in res)) * vf
+        e = jnp.sqrt(sum((q[i] - task[i] - g_p * (q[i] - proj_p[i])) ** 2 for i in range(n)))
         gk = g[:, None]
-        Vn = tuple(gk * (q[i] - proj[i]) * vf for i in range(n))  # line 10: v̄ = γ (I − J# J) q̇
+        Vn = [gk * (q[i] - proj[i]) for i in range(n)]  # line 10: v̄ = γ (I − J# J) q̇
         u = [w[i] * task[i] for i in range(n)]  # ū = Jᵀ B ẋ = W J# ẋ (Eq 18)
-        esum, S, omega = _sample_sums(e, Vn, u, q)  # Ω = Ū Q̇ᵀ
-        err = esum / count
+        sums = _sample_sums([e] + [a[i] * q[j] for a in (Vn, u) for i in range(n) for j in range(n)])
+        S = jnp.stack(sums[1 : 1 + n * n]).reshape((n, n, C))  # V̄ Q̇ᵀ
+        omega = jnp.stack(sums[1 + n * n :]).reshape((n, n, C))  # Ω = Ū Q̇ᵀ
+        err = sums[0] / count
         psi = qqT - S  # Ψ = (Q̇ − V̄) Q̇ᵀ
         wn = _closed_form_update(w, psi, omega, w_min, w_max, fixed)[..., None]
         active = ~s["done"]
@@ -239,7 +229,8 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
         a1 = active[:, None]
         return dict(
             w=jnp.where(a1 & finite[:, None], wn, w),
-            V=tuple(jnp.where(a1, vn, v) for vn, v in zip(Vn, V)),
+            w_prev=jnp.where(a1, w, s["w_prev"]),
+            gamma_prev=jnp.where(active, g, s["gamma_prev"]),
             gamma=jnp.where(active, g + rate * (1.0 - g), g),  # γ_{t+1} = γ_t + c (1 − γ_t)
             err=jnp.where(active, err, s["err"]),
             hist=s["hist"].at[it].set(jnp.where(active, err, jnp.nan)),
@@ -255,7 +246,8 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
 
     s0 = dict(
         w=jnp.ones((n, C, 1), qd.dtype),
-        V=tuple(jnp.zeros_like(q[0]) for _ in range(n)),
+        w_prev=jnp.ones((n, C, 1), qd.dtype),
+        gamma_prev=jnp.zeros((C,), qd.dtype),  # no null-space estimate before the first update
         gamma=gamma0.astype(qd.dtype),
         err=jnp.full((C,), jnp.nan, qd.dtype),
         hist=jnp.full((max_iter, C), jnp.nan, qd.dtype),
@@ -269,9 +261,9 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
     return s["w"][..., 0], s["err"], s["hist"], s["iters"], s["conv"], s["gamma"], s["fin"]
 
 
-@partial(jax.jit, static_argnames=("max_iter", "fixed", "chunk"))
-def _algorithm1(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter, fixed, chunk):
-    """All items, batch flattened: ``qdot`` (B, K, n), ``xdot`` (B, K, m), ``J`` (B, K, m, n),
+def _algorithm1_local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter,
+                      fixed, chunk):
+    """All items of one device: ``qdot`` (B, K, n), ``xdot`` (B, K, m), ``J`` (B, K, m, n),
     ``mask`` (B, K), ``gamma0`` (B,). Items are padded to whole chunks of ``chunk`` (padding has no
     valid sample, so it stops at once). Returns w (B, n), err (B,), hist (B, max_iter), …"""
     B0 = qdot.shape[0]
@@ -279,23 +271,43 @@ def _algorithm1(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, 
     if pad:
         padB = lambda a: jnp.concatenate([a, jnp.zeros((pad,) + a.shape[1:], a.dtype)])  # noqa: E731
         qdot, xdot, J, mask, gamma0 = (padB(a) for a in (qdot, xdot, J, mask, gamma0))
-    qd, xd, Jc, valid = _prepare(qdot, xdot, J, mask)
-    B = qd.shape[1]
+    B = qdot.shape[0]
     run = partial(_algorithm1_chunk, rate=rate, w_min=w_min, w_max=w_max, tol=tol,
                   step_tol=step_tol, max_iter=max_iter, fixed=fixed)
-    if chunk >= B:
-        return _items_first(run(qd, xd, Jc, valid, gamma0), B0)
-    nc = B // chunk
 
-    def split(a, ax):  # (…, B, …) -> (nc, …, chunk, …)
-        return jnp.moveaxis(a.reshape(a.shape[:ax] + (nc, chunk) + a.shape[ax + 1:]), ax, 0)
+    def one(c):  # one chunk, item-first -> component-leading (in cache), then iterate
+        return run(*_prepare(*c[:4]), c[4])
+
+    items = (qdot, xdot, J, mask, gamma0)
+    if chunk >= B:
+        return _items_first(one(items), B0)
+    nc = B // chunk
 
     def join(a):  # (nc, …, chunk) -> (…, B)
         return jnp.moveaxis(a, 0, -2).reshape(a.shape[1:-1] + (B,))
 
-    out = lax.map(lambda c: run(*c), (split(qd, 1), split(xd, 1), split(Jc, 2), split(valid, 0),
-                                      split(gamma0, 0)))
+    out = lax.map(one, tuple(a.reshape((nc, chunk) + a.shape[1:]) for a in items))
     return _items_first(tuple(join(a) for a in out), B0)
+
+
+def _algorithm1_all(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter,
+                    fixed, chunk, mesh=None):
+    """:func:`_algorithm1_local` on one device, or (``mesh``: a 1-D mesh with axis "items") on
+    each device's share of the items (B divisible by the mesh size), without communication."""
+    local = partial(_algorithm1_local, max_iter=max_iter, fixed=fixed, chunk=chunk)
+    if mesh is None:
+        return local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol)
+    items, rep = PartitionSpec("items"), PartitionSpec()
+    return jax.shard_map(local, mesh=mesh, in_specs=(items,) * 5 + (rep,) * 5, out_specs=items,
+                         check_vma=False)(
+        qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol)
+
+
+_STATIC = ("max_iter", "fixed", "chunk", "mesh")
+_algorithm1 = jax.jit(_algorithm1_all, static_argnames=_STATIC, compiler_options=_FAST_SUMS)
+# inside a caller's jit (compiler options apply to top-level computations only): strict sums,
+# ≈ 4× slower
+_algorithm1_traced = jax.jit(_algorithm1_all, static_argnames=_STATIC)
 
 
 def _items_first(out, B0):
@@ -316,27 +328,65 @@ def _prepare(qdot, xdot, J, mask):
     return to_soa(qv), to_soa(xv), to_soa(Jv, 2), valid
 
 
-def _screen(qdot, xdot, J, mask, on_invalid, rank_tol):
-    """Raise on (or collect, for ``on_invalid='flag'``) items with unusable data."""
-    if on_invalid not in ("raise", "flag"):
-        raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
-    if not is_concrete(qdot, xdot, J, mask):
+# per-item screening codes, in the order in which they are reported
+_SCREEN_MESSAGES = ("`qdot` contains NaN or inf", "`xdot` contains NaN or inf", "`J` contains NaN or inf",
+                    "`J` is rank-deficient (rank < m) at sample {}", "`mask` leaves no valid sample")
+
+
+@jax.jit
+def _screen_codes(qdot, xdot, J, valid, rank_tol):
+    """Per item (B,): 0 usable, else 1 + the index of the first problem in ``_SCREEN_MESSAGES``;
+    and the first rank-deficient valid sample. ``qdot`` (B, K, n), ``xdot`` (B, K, m),
+    ``J`` (B, K, m, n), ``valid`` (B, K)."""
+    m = J.shape[-2]
+    bad = [jnp.any(~jnp.all(jnp.isfinite(a), axis=tuple(range(2, a.ndim))) & valid, axis=-1)
+           for a in (qdot, xdot, J)]
+    n = J.shape[-1]
+    Jz = [[jnp.where(jnp.isfinite(J[:, :, r, c]), J[:, :, r, c], 0.0) for c in range(n)] for r in range(m)]
+    JJ = [[sum(Jz[i][c] * Jz[j][c] for c in range(n)) for j in range(m)] for i in range(m)]
+    tr = sum(JJ[i][i] for i in range(m)) / m
+    # det(JJᵀ)/(tr/m)^m ≤ λ_min/λ_mean: a scale-free test for a rank-deficient Jacobian
+    ratio = det(jnp.stack([jnp.stack(r) for r in JJ])) / jnp.where(tr > 0, tr, 1.0) ** m
+    sing = ((ratio <= rank_tol) | (tr <= 0)) & valid
+    bad += [jnp.any(sing, axis=-1), ~jnp.any(valid, axis=-1)]
+    code = jnp.zeros(valid.shape[:1], jnp.int32)
+    for k in reversed(range(len(bad))):
+        code = jnp.where(bad[k], k + 1, code)
+    return code, jnp.argmax(sing, axis=-1)
+
+
+def _screen(qdot, xdot, J, mask, on_invalid, rank_tol, batch):
+    """Raise on (or flag, for ``on_invalid='flag'``) items with NaN/inf or rank-deficient data.
+
+    Items flat: ``qdot`` (B, K, n), ``xdot`` (B, K, m), ``J`` (B, K, m, n) (device arrays, possibly
+    sharded), ``mask`` (B, K) NumPy bool; ``batch`` the items' shape for messages. Returns the mask
+    with flagged items emptied (they stop at once and report status 2) and the flags (B,) or None.
+    """
+    codes, first = (np.asarray(a) for a in _screen_codes(qdot, xdot, J, mask, float(rank_tol)))
+    codes, first = codes[: len(mask)], first[: len(mask)]
+    if not codes.any():
         return mask, None
-    bad = _invalid_items(qdot, xdot, J, mask, rank_tol)
-    lead = tuple(np.shape(qdot)[:-2])
-    flags = np.zeros(lead, bool)
-    if bad:
-        if on_invalid == "raise":
-            idx, msg = next(iter(bad.items()))
-            where = f" (item {tuple(int(i) for i in idx)})" if lead else ""
-            raise ValueError(f"{msg}{where}; pass on_invalid='flag' to flag such items instead")
-        for idx in bad:
-            flags[idx] = True
-        # flagged items: no valid samples, so they stop at once and report status 2
-        base = np.ones(np.shape(qdot)[:-1], bool) if mask is None else np.asarray(mask, bool).copy()
-        base[flags] = False
-        mask = base
+    if on_invalid == "raise":
+        b = int(np.argmax(codes == codes[codes > 0].min()))
+        msg = _SCREEN_MESSAGES[codes[b] - 1].format(int(first[b]))
+        where = f" (item {tuple(int(i) for i in np.unravel_index(b, batch))})" if batch else ""
+        raise ValueError(f"{msg}{where}; pass on_invalid='flag' to flag such items instead")
+    flags = codes > 0
+    mask = mask.copy()
+    mask[flags] = False
     return mask, flags
+
+
+def _item_mesh(devices, B):
+    """A 1-D mesh (axis "items") over ``devices`` (default: all local devices), or None for one."""
+    if devices is None:
+        devs = jax.local_devices()
+    else:
+        devs = list(devices) if isinstance(devices, list | tuple) else None
+        if not devs or not all(isinstance(d, jax.Device) for d in devs):
+            raise TypeError(f"`devices` must be None or a non-empty list of jax devices, got {devices!r}")
+    devs = devs[: max(1, min(len(devs), B))]
+    return Mesh(np.asarray(devs), ("items",)) if len(devs) > 1 else None
 
 
 def estimate_ik_weights(
@@ -355,6 +405,7 @@ def estimate_ik_weights(
     fixed=None,
     on_invalid: str = "raise",
     rank_tol: float = 1e-10,
+    devices=None,
 ) -> IKWeightsResult:
     """IK weights ``w`` (..., n) by Algorithm 1 of Khoramshahi et al. (2022), for every batch item.
 
@@ -370,7 +421,13 @@ def estimate_ik_weights(
     ``fixed`` joints (bool (n,) mask or indices) held at 1 and left out of the normalisation (the
     over-specified-joint convention of Experiment 1); ``on_invalid`` 'raise' (default) or 'flag'
     items with NaN/inf velocities or rank-deficient Jacobians (``status`` 2, ``w`` NaN) while the
-    others go on; ``rank_tol`` threshold on ``det(JJᵀ)/(tr(JJᵀ)/m)^m``.
+    others go on; ``rank_tol`` threshold on ``det(JJᵀ)/(tr(JJᵀ)/m)^m``; ``devices`` the devices
+    over which the items are split (default: all of ``jax.local_devices()``; on a CPU, start Python
+    with ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` to get one device per core:
+    an XLA:CPU device also spreads each large fused loop over its own thread pool). Each device
+    iterates on its share of the items without communication; results agree with one device's to
+    rounding (the sums over samples are reassociated for vectorisation, so their rounding depends
+    on the chunk shape).
 
     **Returns:** :class:`IKWeightsResult`. Not differentiable (clipping, stopping rule); see
     :func:`estimate_ik_weights_lm` for the gradient-based variant.
@@ -385,30 +442,56 @@ def estimate_ik_weights(
         raise ValueError(f"`max_iter` must be a positive integer, got {max_iter}")
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
-    mask, flags = _screen(qdot, xdot, J, mask, on_invalid, rank_tol)
     batch = tuple(qdot.shape[:-2])
     g = jnp.asarray(gamma, dtype=jnp.result_type(float))
     if g.ndim and tuple(np.broadcast_shapes(g.shape, batch)) != batch:
         raise ValueError(f"`gamma` must be a scalar or broadcast to the batch shape {batch}, got {g.shape}")
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    # small problems in one piece (compiles faster), large ones in cache-sized chunks of items
-    chunk = B if B * K <= _DIRECT_SAMPLES else max(1, min(B, _CHUNK_SAMPLES // max(K, 1)))
     flat = lambda a, k: a.reshape((B,) + a.shape[a.ndim - k:])  # noqa: E731
-    mf = np.ones((B, K), bool) if mask is None else mask.reshape(B, K)
-    gf = jnp.broadcast_to(g, batch).reshape(B)
-    w, err, hist, iters, conv, gam, fin = _algorithm1(
-        flat(qdot, 2), flat(xdot, 2), flat(J, 3), mf, gf,
+    arrays = [flat(qdot, 2), flat(xdot, 2), flat(J, 3),
+              np.ones((B, K), bool) if mask is None else mask.reshape(B, K),
+              jnp.broadcast_to(g, batch).reshape(B)]
+    concrete = is_concrete(*arrays)
+    mesh = _item_mesh(devices, B) if concrete else None
+    if mesh is not None:
+        # each device gets an equal share of the items (padding: items without valid samples)
+        arrays = [np.asarray(a) for a in arrays]
+        pad = -B % mesh.size
+        if pad:
+            arrays = [np.concatenate([a, np.zeros((pad,) + a.shape[1:], a.dtype)]) for a in arrays]
+        arrays = jax.device_put(arrays, NamedSharding(mesh, PartitionSpec("items")), may_alias=True)
+        arrays[3] = np.asarray(arrays[3])  # the mask stays on the host for screening
+    elif concrete:
+        # without a copy where possible (aligned host memory); see the wait at the end
+        arrays = [jax.device_put(a, may_alias=True) for a in arrays[:3]] + [np.asarray(arrays[3]), arrays[4]]
+    flags = None
+    if on_invalid not in ("raise", "flag"):
+        raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
+    if concrete:
+        arrays[3], flags = _screen(*arrays[:4], on_invalid, rank_tol, batch)
+        flags = None if flags is None else flags[:B]
+        if mesh is not None:
+            arrays[3] = jax.device_put(arrays[3], NamedSharding(mesh, PartitionSpec("items")))
+    # small problems in one piece (compiles faster), large ones in cache-sized chunks of items
+    Bl = arrays[0].shape[0] // (1 if mesh is None else mesh.size)
+    nc = -(-Bl * K // _CHUNK_SAMPLES) if Bl * K > _DIRECT_SAMPLES else 1
+    out = (_algorithm1 if concrete else _algorithm1_traced)(
+        *arrays,
         jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
         jnp.asarray(float(w_min)), jnp.asarray(np.inf if w_max is None else float(w_max)),
         jnp.asarray(float(tol)), jnp.asarray(float(step_tol)),
-        max_iter=int(max_iter), fixed=fixed_t, chunk=chunk,
+        max_iter=int(max_iter), fixed=fixed_t, chunk=-(-Bl // nc), mesh=mesh,
     )
-    unflat = lambda a: a.reshape(batch + a.shape[1:])  # noqa: E731
-    w, err, hist, iters, conv, gam, fin = (unflat(a) for a in (w, err, hist, iters, conv, gam, fin))
+    if mesh is not None:  # results back on one device, padding dropped
+        out = jax.device_put(out, mesh.devices.flat[0])
+    if concrete:  # the device arrays may alias the caller's NumPy inputs: finish before returning
+        out = jax.block_until_ready(out)
+    unflat = lambda a: a[:B].reshape(batch + a.shape[1:])  # noqa: E731
+    w, err, hist, iters, conv, gam, fin = (unflat(a) for a in out)
     status = jnp.where(fin, OK, NONFINITE)
     if flags is not None and flags.any():
-        fl = jnp.asarray(flags)
+        fl = jnp.asarray(flags.reshape(batch))
         status = jnp.where(fl, INVALID_INPUT, status)
         w = jnp.where(fl[..., None], jnp.nan, w)
         err = jnp.where(fl, jnp.nan, err)
@@ -494,16 +577,17 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
     _check_gamma(gamma, None)
-    mask, flags = _screen(qdot, xdot, J, mask, "raise", 1e-10)
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     free = tuple(i for i in range(n) if not fixed_t[i])
     batch = tuple(qdot.shape[:-2])
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    qd, xd, Jc, valid = _prepare(qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)),
-                                 J.reshape((B, K) + tuple(J.shape[-2:])),
-                                 None if mask is None else jnp.asarray(mask).reshape(B, K))
+    qf, xf, Jf = qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)), J.reshape((B, K) + tuple(J.shape[-2:]))
+    if is_concrete(qf, xf, Jf, mask):
+        mf = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
+        _screen(qf, xf, Jf, mf, "raise", 1e-10, batch)
+    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask).reshape(B, K))
     g = jnp.broadcast_to(jnp.asarray(gamma, dtype=qd.dtype), batch).reshape(B)
     w, cost, steps, conv = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
                                      max_steps=int(max_steps))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import from_soa, mm, mv, spd_inv, spd_solve, to_soa
+from ._linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
 
 
 def admittance_terms_soa(J, A):
@@ -23,14 +23,24 @@ def admittance_terms_soa(J, A):
 
 def _diag_terms(J, a):
     """Nested lists ``P[i][r] = a_i J_ri`` and ``M[r][c] = Σ_i J_ri a_i J_ci`` (no stacking, so
-    XLA fuses everything that reads them into one loop)."""
-    m, n = J.shape[:2]
-    P = [[a[i] * J[r, i] for r in range(m)] for i in range(n)]
+    XLA fuses everything that reads them into one loop). ``J`` (m, n, ...) or nested lists."""
+    J = J if isinstance(J, list) else elements(J)
+    m, n = len(J), len(J[0])
+    P = [[a[i] * J[r][i] for r in range(m)] for i in range(n)]
     M = [[None] * m for _ in range(m)]
     for r in range(m):
         for c in range(r, m):
-            M[r][c] = M[c][r] = sum(J[r, i] * P[i][c] for i in range(n))
+            M[r][c] = M[c][r] = sum(J[r][i] * P[i][c] for i in range(n))
     return P, M
+
+
+def pinv_diag_lists(J, a, *rhs):
+    """Element-list form of :func:`pinv_apply_diag_soa`: ``J`` nested lists ``J[r][i]`` (or
+    (m, n, ...)), ``a`` the n diagonal admittances, each ``b`` in ``rhs`` a list of m arrays;
+    returns ``J#_W b`` as one list of n arrays per ``b``."""
+    P, M = _diag_terms(J, a)
+    m, n = len(M), len(P)
+    return [[sum(P[i][r] * y[r] for r in range(m)) for i in range(n)] for y in spd_solve_lists(M, *rhs)]
 
 
 def pinv_apply_diag_soa(J, a, *rhs):
@@ -39,14 +49,8 @@ def pinv_apply_diag_soa(J, a, *rhs):
     The weighted pseudo-inverse applied without forming it: one ``M = J A Jᵀ`` shared by all
     right-hand sides, no intermediate stacked ``P`` (several times faster on CPU for large batches).
     """
-    P, M = _diag_terms(J, a)
-    Ms = jnp.stack([jnp.stack(r) for r in M])
-    m, n = len(M), len(P)
-    out = []
-    for b in rhs:
-        y = spd_solve(Ms, b)
-        out.append(jnp.stack([sum(P[i][r] * y[r] for r in range(m)) for i in range(n)]))
-    return out
+    lists = pinv_diag_lists(J, a, *([b[j] for j in range(b.shape[0])] for b in rhs))
+    return [jnp.stack(x) for x in lists]
 
 
 def pinv_soa(J, A):

@@ -290,3 +290,72 @@ def test_lambda0_pmp_movements_give_back_W():
     assert bool(res.converged)
     w = np.asarray(res.w)
     assert np.all(np.abs(w / w.max() - w_true) <= 0.05 * w_true), w
+
+
+# ---------------------------------------------------------------------------------------------
+# the list-level kernels of the fused Algorithm-1 loop, and items split over devices
+
+
+def test_list_level_solve_and_pinv_against_numpy(rng):
+    """``spd_solve_lists`` (closed forms for m <= 3, LDLᵀ above) and ``pinv_diag_lists`` ==
+    ``numpy.linalg.solve`` and the NumPy formula ``W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹ b``."""
+    from pmpjax._linalg import spd_solve_lists
+    from pmpjax._redundancy import pinv_diag_lists
+
+    for m in (1, 2, 3, 4):
+        A = rng.standard_normal((6, m, m + 2))
+        M = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(m)  # (6, m, m) SPD
+        b1, b2 = rng.standard_normal((2, 6, m))
+        Ml = [[jnp.asarray(M[:, r, c]) for c in range(m)] for r in range(m)]
+        got = spd_solve_lists(Ml, list(jnp.asarray(b1.T)), list(jnp.asarray(b2.T)))
+        for b, y in zip((b1, b2), got):
+            assert np.allclose(np.stack(y, -1), np.linalg.solve(M, b[..., None])[..., 0], rtol=1e-10, atol=1e-12)
+    n, m = 5, 3
+    J = rng.standard_normal((6, m, n))
+    w = rng.uniform(0.05, 1.0, (6, n))
+    b = rng.standard_normal((6, m))
+    Jl = [[jnp.asarray(J[:, r, i]) for i in range(n)] for r in range(m)]
+    (got,) = pinv_diag_lists(Jl, list(jnp.asarray(1.0 / w.T)), list(jnp.asarray(b.T)))
+    JA = J / w[:, None, :]
+    ref = np.einsum("kir,kr->ki", np.swapaxes(JA, -1, -2) @ np.linalg.inv(JA @ np.swapaxes(J, -1, -2)), b)
+    assert np.allclose(np.stack(got, -1), ref, rtol=1e-10, atol=1e-12)
+
+
+_TWO_DEVICES = r"""
+import json, jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_rank_promotion", "raise")
+import fitting
+from fitting._ik_examples import fig1_data
+q, x, J = (np.array(a) for a in fig1_data(jax.random.PRNGKey(2), n_reps=7, K=120))
+q[3, 5, 1] = np.nan  # a flagged item
+mask = np.ones((7, 120), bool); mask[5, 80:] = False  # a ragged item
+run = lambda devs: fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_iter=60,
+                                              on_invalid="flag", devices=devs)
+one, two = run(jax.devices()[:1]), run(None)
+print(json.dumps({"devices": len(jax.devices()), "w1": np.asarray(one.w).tolist(),
+                  "w2": np.asarray(two.w).tolist(), "it1": np.asarray(one.iterations).tolist(),
+                  "it2": np.asarray(two.iterations).tolist(), "st1": np.asarray(one.status).tolist(),
+                  "st2": np.asarray(two.status).tolist(), "out_devices": len(two.w.devices())}))
+"""
+
+
+def test_items_split_over_two_devices_equal_one_device():
+    """``devices``: 7 items split over 2 CPU devices (padding, a flagged and a ragged item) give
+    the single-device weights, iterations and statuses, gathered on one device."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, XLA_FLAGS=(os.environ.get("XLA_FLAGS", "")
+                                      + " --xla_force_host_platform_device_count=2").strip())
+    proc = subprocess.run([sys.executable, "-c", _TWO_DEVICES], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["devices"] == 2 and r["out_devices"] == 1
+    w1, w2 = np.array(r["w1"]), np.array(r["w2"])
+    assert r["st1"] == r["st2"] and r["st1"][3] == 2 and sum(r["st1"]) == 2
+    assert r["it1"] == r["it2"]
+    assert np.allclose(w1, w2, atol=1e-12, rtol=0, equal_nan=True)
