@@ -92,6 +92,16 @@ def test_batched_equals_per_subject(fig1, fig1_result):
         assert int(one.iterations) == int(fig1_result.iterations[i])
 
 
+def test_inside_a_callers_jit_equals_eager(fig1, fig1_result):
+    """Traced inputs take the strict-summation kernel (compiler options apply to top-level calls
+    only); same weights as the eager (reassociated-sum) call to rounding."""
+    q, x, J = fig1
+    f = jax.jit(lambda q, x, J: fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_iter=150))
+    res = f(q[:4], x[:4], J[:4])
+    np.testing.assert_allclose(res.w, fig1_result.w[:4], atol=1e-10, rtol=0)
+    assert np.array_equal(res.iterations, fig1_result.iterations[:4])
+
+
 def test_mask_equals_truncation(fig1):
     q, x, J = (a[0].copy() for a in fig1)
     mask = np.arange(500) < 300
