@@ -73,8 +73,8 @@ def _kkt_solve(H, J, a, b):
     ``M dq − Jᵀ λ = a + ρ Jᵀ b`` with ``M = H + ρ JᵀJ``, which is positive definite whenever the
     reduced Hessian is (Debreu), so ``dq = u + V λ`` with ``u = M⁻¹ (a + ρ Jᵀ b)``,
     ``V = M⁻¹ Jᵀ``, and ``(J V) λ = b − J u`` (m×m Schur complement). Both solves are the
-    unrolled LDLᵀ of :func:`pmpjax._linalg.spd_solve`: elementwise under ``vmap`` (XLA fuses
-    them; no batched tiny LAPACK calls), and the factorisation is computed once for all ``k``
+    unrolled closed forms / LDLᵀ of :func:`pmpjax._linalg.spd_solve`: elementwise under ``vmap``
+    (XLA fuses them; no batched tiny LAPACK calls), and the factors are computed once for all ``k``
     columns — under ``jacfwd`` (a vmap over tangents) it depends on primals only and is shared
     by every tangent. ``ρ = 10 m |H|_F / |J|_F²`` balances the two blocks of ``M``.
     """

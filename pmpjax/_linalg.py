@@ -41,15 +41,9 @@ def mm(A, B):
 
 
 def spd_solve(M, b):
-    """Solve ``M y = b`` for symmetric positive definite ``M`` (m, m, ...), ``b`` (m, ...).
-
-    Closed forms for m <= 2, an unrolled LDLᵀ factorisation otherwise (no pivoting: SPD).
-    """
-    m = M.shape[0]
-    if m == 1:
-        return b / M[0]
-    solve = spd_solve_lists if m == 2 else _ldl_solve_lists
-    (x,) = solve(elements(M), [b[j] for j in range(m)])
+    """Solve ``M y = b`` for symmetric positive definite ``M`` (m, m, ...), ``b`` (m, ...):
+    :func:`spd_solve_lists` on the elements."""
+    (x,) = spd_solve_lists(elements(M), [b[j] for j in range(M.shape[0])])
     return jnp.stack(x)
 
 
@@ -60,7 +54,7 @@ def spd_solve_lists(M, *bs):
     Closed forms (adjugate over determinant) for m <= 3, LDLᵀ above. Nothing is stacked and the
     adjugate needs a single division, so XLA fuses the whole solve into the loop that reads the
     solutions (an LDLᵀ's divisions each end a fused loop on XLA:CPU: measured 2× slower in the
-    IK-weight kernel). For SPD ``M`` of size 3 both agree to rounding.
+    IK-weight kernel).
     """
     m = len(M)
     if m == 1:
