@@ -452,27 +452,25 @@ def estimate_ik_weights(
     arrays = [flat(qdot, 2), flat(xdot, 2), flat(J, 3),
               np.ones((B, K), bool) if mask is None else mask.reshape(B, K),
               jnp.broadcast_to(g, batch).reshape(B)]
-    concrete = is_concrete(*arrays)
-    mesh = _item_mesh(devices, B) if concrete else None
-    if mesh is not None:
-        # each device gets an equal share of the items (padding: items without valid samples)
-        arrays = [np.asarray(a) for a in arrays]
-        pad = -B % mesh.size
-        if pad:
-            arrays = [np.concatenate([a, np.zeros((pad,) + a.shape[1:], a.dtype)]) for a in arrays]
-        arrays = jax.device_put(arrays, NamedSharding(mesh, PartitionSpec("items")), may_alias=True)
-        arrays[3] = np.asarray(arrays[3])  # the mask stays on the host for screening
-    elif concrete:
-        # without a copy where possible (aligned host memory); see the wait at the end
-        arrays = [jax.device_put(a, may_alias=True) for a in arrays[:3]] + [np.asarray(arrays[3]), arrays[4]]
-    flags = None
     if on_invalid not in ("raise", "flag"):
         raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
+    concrete = is_concrete(*arrays)
+    mesh = _item_mesh(devices, B) if concrete else None
+    flags = None
     if concrete:
-        arrays[3], flags = _screen(*arrays[:4], on_invalid, rank_tol, batch)
-        flags = None if flags is None else flags[:B]
         if mesh is not None:
-            arrays[3] = jax.device_put(arrays[3], NamedSharding(mesh, PartitionSpec("items")))
+            # each device gets an equal share of the items (padding: items without valid samples)
+            arrays = [np.asarray(a) for a in arrays]
+            pad = -B % mesh.size
+            if pad:
+                arrays = [np.concatenate([a, np.zeros((pad,) + a.shape[1:], a.dtype)]) for a in arrays]
+        # without a copy where possible (aligned host memory); see the wait at the end
+        where = None if mesh is None else NamedSharding(mesh, PartitionSpec("items"))
+        put = lambda a: jax.device_put(a, where, may_alias=True)  # noqa: E731
+        qf, xf, Jf = (put(a) for a in arrays[:3])
+        mf, flags = _screen(qf, xf, Jf, np.asarray(arrays[3]), on_invalid, rank_tol, batch)
+        flags = None if flags is None else flags[:B]
+        arrays = [qf, xf, Jf, put(mf), put(arrays[4])]
     # small problems in one piece (compiles faster), large ones in cache-sized chunks of items
     Bl = arrays[0].shape[0] // (1 if mesh is None else mesh.size)
     nc = -(-Bl * K // _CHUNK_SAMPLES) if Bl * K > _DIRECT_SAMPLES else 1
