@@ -281,11 +281,11 @@ def nio():
     mask[-1, 5:] = False  # subject 8: 5 samples < 8 parameters -> cannot be fitted
     res = fitting.fit_donders(pj.Wrist(), pointing, postures, mask=mask, n_starts=2, seed=0)
     truth = np.concatenate([fitting.params_from_stiffness(K), q], -1)
-    return res, np.concatenate([truth, truth[[3]], truth[:1]]), K, q
+    return res, np.concatenate([truth, truth[[3]], truth[:1]]), K, q, rec
 
 
 def test_nio_converges_and_flags_failing_subject(nio):
-    res, _, _, _ = nio
+    res, *_ = nio
     assert res.KJ.shape == (8, 3, 3) and res.start_loss.shape == (8, 2)
     assert np.all(res.converged[:7]) and np.all(res.status[:7] == 0)
     assert not res.converged[7] and res.status[7] == 3
@@ -300,7 +300,7 @@ def test_nio_converges_and_flags_failing_subject(nio):
 
 
 def test_nio_predicts_held_out_torsion(nio):
-    res, _, K, q = nio
+    res, _, K, q, _ = nio
     grid = pj.screen_grid(7) * 0.97  # held-out positions (not sampled points)
     t_fit = np.asarray(fitting.predicted_torsion(pj.Wrist(), res.KJ[:6], res.q_rest[:6], grid))
     t_true = np.asarray(fitting.predicted_torsion(pj.Wrist(), K, q, grid))
@@ -309,7 +309,7 @@ def test_nio_predicts_held_out_torsion(nio):
 
 
 def test_nio_parameters_within_three_standard_errors(nio):
-    res, truth, _, _ = nio
+    res, truth, *_ = nio
     truth_c = np.asarray(jax.vmap(lambda t: fitting.donders_coefficients(t, 3))(jnp.asarray(truth[:7])))
     # The six Table subjects at 0.5° noise: along every identifiable direction (rows of
     # `directions`, in the coefficients of Donders' law) the error is within 3 reported SE.
@@ -326,12 +326,9 @@ def test_nio_parameters_within_three_standard_errors(nio):
 def test_nio_likelihood_ratio_and_coefficients(nio):
     """Fit at least as good as the truth, and the likelihood-ratio statistic of the truth is a
     plausible χ²_p draw; coefficient covariance = delta method of the parameter covariance."""
-    res, truth, _, _ = nio
+    res, truth, _, _, rec = nio
     from fitting._donders import _residual_fn
 
-    names, K, q = pj.paper_subjects()
-    idx = [0, 1, 2, 3, 4, 5, 3]  # the fixture's recording
-    rec = pj.synthetic_recordings(K[idx], q[idx], N_FIT, noise_deg=[0.5] * 6 + [LOW_NOISE], seed=11)
     resid = jax.jit(_residual_fn(pj.Wrist(), 5, 4.0, "torsion", 1e-10))
     p = truth.shape[1]
     for i in range(6):
