@@ -19,6 +19,7 @@ All three use ``q̇ = A (Jᵀ (F + λ0) − τ_el)`` with ``A = W⁻¹``, ``λ0 
 from __future__ import annotations
 
 import ctypes
+import json
 import math
 import os
 import shutil
@@ -329,3 +330,12 @@ def machine() -> str:
     except (OSError, StopIteration):
         model = "unknown CPU"
     return f"{os.cpu_count()}-core {model} (KVM), no GPU"
+
+
+def write_results(name: str, res: dict) -> str:
+    """Write ``res`` to ``benchmarks/results/<name>.json``; returns the path."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", f"{name}.json")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(res, f, indent=1)
+    return path

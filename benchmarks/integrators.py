@@ -68,7 +68,6 @@ half the cost, and `simulate`'s RK4 stability check accepts up to 4 ms for this 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -87,8 +86,6 @@ import jax.numpy as jnp  # noqa: E402
 import pmpjax as pj  # noqa: E402
 from pmpjax._integrate import integrate  # noqa: E402
 from pmpjax._redundancy import admittance_terms_soa  # noqa: E402
-
-HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 class RK4(diffrax.AbstractERK):
@@ -271,11 +268,7 @@ def main(quick):
     table = render(res, sizes)
     print("\n" + table)
     if not quick:
-        os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-        path = os.path.join(HERE, "results", "integrators.json")
-        with open(path, "w") as f:
-            json.dump(res, f, indent=1)
-        print(f"\nwrote {path}")
+        print(f"\nwrote {bl.write_results('integrators', res)}")
     return res
 
 

@@ -80,7 +80,6 @@ jax.config.update("jax_enable_x64", True)
 import pmpjax as pj  # noqa: E402
 from pmpjax import _simulate  # noqa: E402
 
-HERE = os.path.dirname(os.path.abspath(__file__))
 SAVES = {"final": pj.SaveAt(final=True), "every10": pj.SaveAt(every=10)}
 
 
@@ -325,11 +324,7 @@ def main(quick):
     table = render(res, big)
     print("\n" + table)
     if not quick:
-        os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-        path = os.path.join(HERE, "results", "simulate.json")
-        with open(path, "w") as f:
-            json.dump(res, f, indent=1)
-        print(f"\nwrote {path}")
+        print(f"\nwrote {bl.write_results('simulate', res)}")
     return res
 
 
