@@ -49,7 +49,7 @@ from pmpjax._equilibria import equilibrium_one, equilibrium_posture
 from pmpjax._kinematics import Chain, Wrist
 from pmpjax._orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
 from pmpjax._pytree import replace
-from pmpjax._validate import as_array, check_finite_masked
+from pmpjax._validate import as_array, check_finite_masked, check_positive_int
 
 from ._optimise import covariance, least_squares
 
@@ -353,14 +353,12 @@ def fit_donders(
     for name, a in (("pointing", pointing), ("postures", postures)):
         check_finite_masked(name, a, mask)
     chain.check_target("pointing", pointing[mask])
-    if int(n_starts) != n_starts or n_starts < 1:
-        raise ValueError(f"`n_starts` must be a positive integer, got {n_starts}")
-    if int(max_steps) != max_steps or max_steps < 1:
-        raise ValueError(f"`max_steps` must be a positive integer, got {max_steps}")
+    check_positive_int("n_starts", n_starts)
+    check_positive_int("max_steps", max_steps)
     if not (np.isfinite(trace) and trace > 0):
         raise ValueError(f"`trace` must be positive, got {trace}")
-    if chunk_size is not None and (int(chunk_size) != chunk_size or chunk_size < 1):
-        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size}")
+    if chunk_size is not None:
+        check_positive_int("chunk_size", chunk_size)
     # Compiled shapes are bucketed (subjects per call: 8 or 16 unless `chunk_size` is given;
     # samples: power of two >= 64, padding masked out) so similar problems share a compile.
     chunk = int(chunk_size) if chunk_size is not None else (8 if S <= 8 else 16)

@@ -26,7 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from pmpjax._linalg import det, mv, to_soa
 from pmpjax._pytree import pytree_dataclass
 from pmpjax._redundancy import pinv_apply_diag_soa, pinv_diag_lists
-from pmpjax._validate import as_array, is_concrete
+from pmpjax._validate import as_array, check_positive_int, is_concrete
 
 from ._optimise import least_squares
 
@@ -438,8 +438,7 @@ def estimate_ik_weights(
         raise ValueError(f"`w_min` must lie in (0, 1), got {w_min}")
     if w_max is not None and not float(w_max) >= 1.0:
         raise ValueError(f"`w_max` must be >= 1 or None, got {w_max}")
-    if int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer, got {max_iter}")
+    check_positive_int("max_iter", max_iter)
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     batch = tuple(qdot.shape[:-2])

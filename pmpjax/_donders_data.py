@@ -45,7 +45,7 @@ from ._orientation import (
     quat_from_matrix,
     wrist_rotation,
 )
-from ._validate import check_finite_masked
+from ._validate import check_finite_masked, check_positive_int
 
 FORMAT = "pmpjax donders v1"
 _QUAT_COLS = ("qw", "qx", "qy", "qz")
@@ -133,8 +133,7 @@ def synthetic_recordings(
     if KJ.ndim == 2:
         KJ, q_rest = KJ[None], q_rest[None]
     S = KJ.shape[0]
-    if int(n_samples) != n_samples or n_samples < 1:
-        raise ValueError(f"`n_samples` must be a positive integer, got {n_samples}")
+    check_positive_int("n_samples", n_samples)
     noise = np.broadcast_to(np.asarray(noise_deg, dtype=float), (S,)) if np.ndim(noise_deg) <= 1 else None
     if noise is None or not np.all(np.isfinite(noise) & (noise >= 0)):
         raise ValueError(f"`noise_deg` must be >= 0 (scalar or one per subject), got {noise_deg}")

@@ -33,7 +33,7 @@ import numpy as np
 from ._kinematics import Chain
 from ._linalg import spd_solve
 from ._pytree import pytree_dataclass
-from ._validate import as_array, check_positive, check_spd
+from ._validate import as_array, check_positive, check_positive_int, check_spd
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
 
@@ -204,8 +204,7 @@ def equilibrium_posture(
     if q_init is not None:
         q_init = as_array("q_init", q_init, tail=(n,))
     check_positive("tol", tol)
-    if int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer, got {max_iter}")
+    check_positive_int("max_iter", max_iter)
     shapes = [np.shape(KJ)[:-2], np.shape(q_rest)[:-1], np.shape(target)[:-1]]
     if q_init is not None:
         shapes.append(np.shape(q_init)[:-1])

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._validate import check_positive_int
+
 #: Peripheral target names in compass order; E = +x1 (right), N = +x2 (up).
 DIRECTIONS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")
 _ANGLE = {name: np.deg2rad(90.0 - 45.0 * i) for i, name in enumerate(DIRECTIONS)}
@@ -27,8 +29,7 @@ def center_out_trials(n_trials: int, *, seed: int = 0, radius: float = np.pi / 1
     Returns ``(order, targets)``: ``order`` (n_trials, 8) direction names, ``targets``
     (n_trials, 16, 2) the movement end points ``[P1, C, P2, C, ...]``.
     """
-    if int(n_trials) != n_trials or n_trials < 1:
-        raise ValueError(f"`n_trials` must be a positive integer, got {n_trials}")
+    check_positive_int("n_trials", n_trials)
     rng = np.random.default_rng(seed)
     tg = center_out_targets(radius)
     order = np.array([[DIRECTIONS[i] for i in rng.permutation(8)] for _ in range(int(n_trials))])

@@ -16,7 +16,7 @@ from ._models import _PMP
 from ._planners import Planner
 from ._pytree import pytree_dataclass, replace
 from ._redundancy import admittance_terms_soa
-from ._validate import as_array, is_concrete
+from ._validate import as_array, check_positive_int, is_concrete
 
 OK, NONFINITE, SINGULAR = 0, 1, 2
 
@@ -35,8 +35,8 @@ class SaveAt:
         given = (self.every is not None) + (self.ts is not None) + bool(self.final)
         if given > 1:
             raise ValueError("SaveAt takes one of `every`, `ts`, `final`")
-        if self.every is not None and (int(self.every) != self.every or self.every < 1):
-            raise ValueError(f"`SaveAt.every` must be a positive integer, got {self.every}")
+        if self.every is not None:
+            check_positive_int("SaveAt.every", self.every)
         if self.ts is not None:
             ts = np.asarray(self.ts, dtype=float).reshape(-1)
             if ts.size == 0 or not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0) or ts[0] < 0:

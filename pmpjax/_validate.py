@@ -64,6 +64,13 @@ def check_positive(name: str, x: Any) -> None:
         raise ValueError(f"`{name}` must be positive, got {a.min() if a.size else a}")
 
 
+def check_positive_int(name: str, v: Any) -> int:
+    """Require ``v`` to be an integer >= 1 (counts, step limits); returns ``int(v)``."""
+    if int(v) != v or v < 1:
+        raise ValueError(f"`{name}` must be a positive integer, got {v}")
+    return int(v)
+
+
 def _fmt(tail: tuple[int | None, ...]) -> str:
     return "(..., " + ", ".join("?" if t is None else str(t) for t in tail) + ")"
 
