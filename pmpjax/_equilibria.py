@@ -14,7 +14,7 @@ Initial guess (default ``q_init = q_rest``, ``λ = 0``): the first Newton step i
 ``KJ``-weighted projection of ``q_rest`` onto the linearised constraint, which is the exact answer
 for a linear chain; curvature corrections converge quadratically. Steps are capped at 0.5 rad
 (infinity norm). The KKT matrix ``[[H, −Jᵀ], [J, 0]]`` is indefinite; it is solved by
-augmented-Lagrangian elimination with unrolled LDLᵀ factors (``_kkt_solve``); ``converged``
+augmented-Lagrangian elimination with unrolled SPD solves (``_kkt_solve``); ``converged``
 additionally requires a strict local minimum (reduced Hessian positive definite), so a saddle
 or maximum of the energy along the task manifold is flagged. Pass ``q_init`` (e.g. an observed
 posture, or the end of a λ0-PMP run) to start elsewhere: the solution is then the local minimum
