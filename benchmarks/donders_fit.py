@@ -32,7 +32,7 @@ at 1000 subjects, 47x. The 0.7 % of subjects not converged are flagged per subje
 
 What changed: (1) the 5×5 indefinite KKT solves of the equilibrium Newton loop and of its
 implicit JVP (one per LM parameter tangent under ``jacfwd``) are an augmented-Lagrangian
-elimination with unrolled SPD solves (``pmpjax._equilibria._kkt_solve``) instead of a batched
+elimination with unrolled SPD solves (``pmpjax._pmp.equilibria._kkt_solve``) instead of a batched
 tiny LAPACK LU: equilibria + their Jacobian 1.75× faster; the factors depend on primals only
 and are shared by all tangents. (2) Chunks of 16 instead of 100 subjects: a vmapped LM (and the
 vmapped Newton loop inside it) runs every lane until the slowest start of its chunk finishes

@@ -85,7 +85,7 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 import fitting  # noqa: E402
-from fitting._ik_examples import fig1_data  # noqa: E402
+from fitting._ik.examples import fig1_data  # noqa: E402
 
 
 def baseline_subject(Qd, Xd, Js, gamma, iters, w_min=1e-3):

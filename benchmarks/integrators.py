@@ -6,7 +6,7 @@ pmpjax's kernels exactly as ``pmpjax.simulate`` builds it (``chain.fk_jac_soa``,
 ``admittance_terms_soa``, ``planner.force_soa``, ``model.qdot_soa``) on the component-leading
 state ``q (3, B)``:
 
-- ``pmpjax RK4 scan``: ``pmpjax._integrate.integrate`` (nested ``lax.scan``), dt = 1 ms — what
+- ``pmpjax RK4 scan``: ``pmpjax._pmp.integrate.integrate`` (nested ``lax.scan``), dt = 1 ms — what
   ``simulate`` uses;
 - ``diffrax RK4``: classical RK4 as a diffrax ``AbstractERK`` (diffrax ships none), constant
   dt = 1 ms, ``SaveAt(t1=True)``;
@@ -40,7 +40,7 @@ diffrax Tsit5 PID (rtol 1e-8): run time × 0.2 (B=1), 0.2 (B=1000), gradient tim
 RK4 (pmpjax scan) error vs dt: 4 ms → 1.7e-10, 2 ms → 1.1e-11, 1 ms → 8.1e-13, 0.5 ms → 2.5e-13; pmpjax.simulate vs this scan solver: 1.4e-17. Load average 6.9 → 8.1.
 
 Conclusion: `pmpjax.simulate` integrates with its own classical RK4 in nested `lax.scan` loops
-(`pmpjax._integrate.integrate`), dt = 1 ms by default. What the measurements say:
+(`pmpjax._pmp.integrate.integrate`), dt = 1 ms by default. What the measurements say:
 
 - **Accuracy.** At dt = 1 ms the final posture is within 8e-13 rad of the DOP853 (rtol 1e-13)
   reference, and the error falls with the 4th power of dt (1.7e-10 at 4 ms, 1.1e-11 at 2 ms);
@@ -84,8 +84,8 @@ import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from pmpjax._integrate import integrate  # noqa: E402
-from pmpjax._redundancy import admittance_terms_soa  # noqa: E402
+from pmpjax._pmp.integrate import integrate  # noqa: E402
+from pmpjax._pmp.redundancy import admittance_terms_soa  # noqa: E402
 
 
 class RK4(diffrax.AbstractERK):

@@ -2,7 +2,7 @@
 
 Each rollout is 2 s (1000 steps of 2 ms) of the 6-DoF arm (contacts disabled, as for fits and
 gradients) with the spring law ``τ = −K (θ − θ_set) − B θ̇`` written into ``qfrc_applied`` every
-step; set-points differ per arm. MJX: ``pmpjax._arm._rollout_batch`` (``lax.scan`` over
+step; set-points differ per arm. MJX: ``pmpjax._springy_arm.arm._rollout_batch`` (``lax.scan`` over
 ``mjx.step``, ``vmap`` over arms), compile time measured separately with ``.lower().compile()``,
 run time = min over repeats with ``block_until_ready``. Baseline, same process and model: the C
 loop in Python (set ``qfrc_applied``, ``mj_step``), one arm, then B arms one after another.
@@ -44,7 +44,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pmpjax import _arm  # noqa: E402
-from pmpjax._primitives import default_primitives  # noqa: E402
+from pmpjax._springy_arm.primitives import default_primitives  # noqa: E402
 
 STEPS = 1000  # 2 s at dt = 2 ms
 

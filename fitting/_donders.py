@@ -45,11 +45,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._equilibria import equilibrium_one, equilibrium_posture
-from pmpjax._kinematics import Chain, Wrist
-from pmpjax._orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
-from pmpjax._pytree import replace
-from pmpjax._validate import as_array, check_finite_masked, check_positive_int
+from pmpjax._base.pytree import replace
+from pmpjax._base.validate import as_array, check_finite_masked, check_positive_int
+from pmpjax._chains.kinematics import Chain, Wrist
+from pmpjax._pmp.equilibria import equilibrium_one, equilibrium_posture
+from pmpjax._wrist.orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
 
 from ._optimise import covariance, least_squares
 

@@ -11,8 +11,8 @@ def ik_hugmp(out: Path, log) -> dict:
     """IK weights of the bundled HuG-MP recordings per subject × task, with bootstrap intervals."""
     import matplotlib.pyplot as plt
 
-    from ._ik_data import hugmp_ik_weights
-    from ._ik_plots import plot_ik_weights
+    from ._ik.datasets import hugmp_ik_weights
+    from ._ik.plots import plot_ik_weights
 
     res = hugmp_ik_weights(n_boot=20, key=None)
     w, lo, hi = (np.asarray(res[k]) for k in ("w", "lo", "hi"))

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from pmpjax._pytree import pytree_dataclass
+from pmpjax._base.pytree import pytree_dataclass
 
 
 @pytree_dataclass

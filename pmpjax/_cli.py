@@ -15,7 +15,7 @@ from pathlib import Path
 
 
 def _figure3(out: Path, log) -> dict:
-    from ._figure3 import figure3_data, plot_figure3
+    from ._wrist.figure3 import figure3_data, plot_figure3
 
     t0 = time.perf_counter()
     data = figure3_data()
@@ -45,8 +45,8 @@ def _ends(data):
 def _figure4(out: Path, log) -> dict:
     import numpy as np
 
-    from ._plots_primitives import plot_summed_moves
-    from ._primitives import moves_from_targets, summed_moves
+    from ._springy_arm.plots import plot_summed_moves
+    from ._springy_arm.primitives import moves_from_targets, summed_moves
 
     # Williamson's Figure 4: a move 0 → 1 (1 s) with a second move to 1.5 issued half-way.
     moves = moves_from_targets(np.zeros(1), np.array([[1.0], [1.5]]), np.array([0.0, 0.5]), 1.0)

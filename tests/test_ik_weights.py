@@ -13,8 +13,8 @@ import scipy.stats
 
 import fitting
 import pmpjax as pj
-from fitting._ik_examples import FIG1_W, fig1_data, fig3_data
-from fitting._ik_weights import box_qp_update, qp_matrices
+from fitting._ik.examples import FIG1_W, fig1_data, fig3_data
+from fitting._ik.weights import box_qp_update, qp_matrices
 
 W_STAR = np.array(FIG1_W)
 
@@ -309,8 +309,8 @@ def test_lambda0_pmp_movements_give_back_W():
 def test_list_level_solve_and_pinv_against_numpy(rng):
     """``spd_solve_lists`` (closed forms for m <= 3, LDLᵀ above) and ``pinv_diag_lists`` ==
     ``numpy.linalg.solve`` and the NumPy formula ``W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹ b``."""
-    from pmpjax._linalg import spd_solve_lists
-    from pmpjax._redundancy import pinv_diag_lists
+    from pmpjax._base.linalg import spd_solve_lists
+    from pmpjax._pmp.redundancy import pinv_diag_lists
 
     for m in (1, 2, 3, 4):
         A = rng.standard_normal((6, m, m + 2))
@@ -336,7 +336,7 @@ import json, jax, numpy as np
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 import fitting
-from fitting._ik_examples import fig1_data
+from fitting._ik.examples import fig1_data
 q, x, J = (np.array(a) for a in fig1_data(jax.random.PRNGKey(2), n_reps=7, K=120))
 q[3, 5, 1] = np.nan  # a flagged item
 mask = np.ones((7, 120), bool); mask[5, 80:] = False  # a ragged item

@@ -5,7 +5,7 @@ import pytest
 from _reference import wrist_fk, wrist_jac
 
 import pmpjax as pj
-from pmpjax._trig import sincos
+from pmpjax._base.trig import sincos
 
 
 def _fd_jac(f, q, h=1e-6):

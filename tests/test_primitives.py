@@ -281,7 +281,7 @@ def test_equilibrium_matches_settled_c_mujoco(free_arm, eq_batch, P):
 
 def test_gravity_terms_match_c_mujoco(free_arm):
     """Closed-form ∇V and ∇²V vs C MuJoCo's qfrc_bias at zero velocity (and its differences)."""
-    from pmpjax._mjcf_chain import gravity_terms
+    from pmpjax._chains.mjcf import gravity_terms
 
     m = free_arm.mj_model
     q = np.array([0.6, 0.9, 0.3, 1.0, 0.4, -0.3])

@@ -7,8 +7,8 @@
   prosthetic elbow) driven by a simulated user in the four conditions Natural, Locked, Coupled,
   Assistive, the last with the controller of Eq 25.
 
-Both integrate with the one RK4 integrator (``pmpjax._integrate``) and resolve redundancy with the
-one weighted pseudo-inverse kernel (``pmpjax._redundancy``).
+Both integrate with the one RK4 integrator (``pmpjax._pmp.integrate``) and resolve redundancy with the
+one weighted pseudo-inverse kernel (``pmpjax._pmp.redundancy``).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._arm4 import Arm4
-from pmpjax._integrate import integrate
-from pmpjax._kinematics import PlanarArm
-from pmpjax._linalg import mv
-from pmpjax._redundancy import pinv_apply_diag_soa
+from pmpjax._base.linalg import mv
+from pmpjax._chains.kinematics import PlanarArm
+from pmpjax._chains.shoulder_elbow import Arm4
+from pmpjax._pmp.integrate import integrate
+from pmpjax._pmp.redundancy import pinv_apply_diag_soa
 
 # Contribution coefficients reported in the paper's Discussion (Eq 26) for Experiment 1:
 # Natural β = (.04, .27, .65, .04), Viscous β = (.09, .68, .14, .09) -> weights ∝ 1/β.
@@ -69,7 +69,7 @@ def _reach(chain, q0, x_goal, w, k_pos, k_null, dt):
 def synthetic_ik_dataset(seed: int = 0, *, n_participants: int = 17, n_trials: int = 20,
                          dt: float = 0.009, drop: float = 0.1, w_sd: float = 0.15,
                          noise: float = 0.02, k_null: float = 0.5, chain: Arm4 | None = None) -> dict:
-    """Seeded synthetic data set in the IK paper's Experiment-1 layout (see ``pmpjax._matdata``).
+    """Seeded synthetic data set in the IK paper's Experiment-1 layout (see ``pmpjax._data.matlab``).
 
     Each participant has true weights per condition (``W_NATURAL``/``W_VISCOUS`` with log-normal
     spread ``w_sd`` on joints 2–3; the elbow is over-specified and kept at 1); a trial is a
@@ -236,9 +236,9 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain: Arm4 | Non
     converged (N, 6[, M]), subjects, skipped {subject: [...]}, notes, failed {subject: message})``;
     a subject that cannot be loaded is reported in ``failed`` and left out.
     """
-    from pmpjax._matdata import hugmp_arrays, load_hugmp
+    from pmpjax._data.matlab import hugmp_arrays, load_hugmp
 
-    from ._ik_analysis import bootstrap_ik_weights, overspecified_joints
+    from .analysis import bootstrap_ik_weights, overspecified_joints
 
     chain = chain or Arm4()
     arrays, names, skipped, notes, failed = [], [], {}, {}, {}

@@ -10,9 +10,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import spd_solve
-from ._pytree import pytree_dataclass, replace, static_field
-from ._validate import check_positive
+from .._base.linalg import spd_solve
+from .._base.pytree import pytree_dataclass, replace, static_field
+from .._base.validate import check_positive
 
 
 def _scale(gain, e):

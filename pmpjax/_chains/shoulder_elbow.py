@@ -13,9 +13,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._kinematics import Chain
-from ._pytree import pytree_dataclass, static_field
-from ._validate import as_array, check_positive
+from .._base.pytree import pytree_dataclass, static_field
+from .._base.validate import as_array, check_positive
+from .kinematics import Chain
 
 
 def _rot(axis, t):

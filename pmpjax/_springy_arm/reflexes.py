@@ -26,10 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._arm import ArmTrajectory, CogArm, run_controller
-from ._primitives import _xi
-from ._pytree import pytree_dataclass, static_field
-from ._validate import as_array, check_positive
+from .._base.pytree import pytree_dataclass, static_field
+from .._base.validate import as_array, check_positive
+from .arm import ArmTrajectory, CogArm, run_controller
+from .primitives import _xi
 
 REACH, GRASP, WITHDRAW, LEAD = 0, 1, 2, 3
 MODES = ("reach", "grasp", "withdraw", "lead")

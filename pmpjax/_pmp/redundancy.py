@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
+from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
 
 
 def admittance_terms_soa(J, A):

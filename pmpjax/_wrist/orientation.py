@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._kinematics import Wrist
+from .._chains.kinematics import Wrist
 
 _WRIST = Wrist()
 

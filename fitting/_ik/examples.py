@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._linalg import from_soa, mv, to_soa
-from pmpjax._redundancy import pinv_apply_diag_soa
+from pmpjax._base.linalg import from_soa, mv, to_soa
+from pmpjax._pmp.redundancy import pinv_apply_diag_soa
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 

@@ -2,7 +2,7 @@
 
 Both go through the shared Levenberg–Marquardt loop (``fitting._optimise.least_squares``) and
 differentiate the gravity equilibrium by the implicit function theorem
-(``pmpjax._primitives.equilibrium``). Each target / subject is one vmapped item with its own
+(``pmpjax._springy_arm.primitives.equilibrium``). Each target / subject is one vmapped item with its own
 convergence flag.
 """
 
@@ -13,10 +13,10 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from pmpjax._arm import CogArm
-from pmpjax._primitives import _equilibrium_one, check_set_point, check_stiffness
-from pmpjax._pytree import pytree_dataclass
-from pmpjax._validate import as_array
+from pmpjax._base.pytree import pytree_dataclass
+from pmpjax._base.validate import as_array
+from pmpjax._springy_arm.arm import CogArm
+from pmpjax._springy_arm.primitives import _equilibrium_one, check_set_point, check_stiffness
 
 from ._optimise import least_squares
 

@@ -29,8 +29,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from ._pytree import pytree_dataclass
-from ._validate import as_array, is_concrete
+from .._base.pytree import pytree_dataclass
+from .._base.validate import as_array, is_concrete
 
 JOINTS = ("sh_flex", "sh_abd", "sh_rot", "el_flex", "wr_flex", "wr_dev")
 DEFAULT_K = (40.0, 40.0, 20.0, 20.0, 5.0, 5.0)  # Nm/rad: human-like, so gravity sags the arm

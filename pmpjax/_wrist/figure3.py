@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kinematics import Wrist
-from ._metrics import curvature_measures
-from ._models import Lambda0PMP, damping_from_stiffness
-from ._planners import ArimotoPlanner
-from ._protocol import DIRECTIONS, center_out_targets
-from ._simulate import SaveAt, simulate_sequence
+from .._chains.kinematics import Wrist
+from .._pmp.models import Lambda0PMP, damping_from_stiffness
+from .._pmp.planners import ArimotoPlanner
+from .._pmp.simulate import SaveAt, simulate_sequence
+from .center_out import DIRECTIONS, center_out_targets
+from .curvature import curvature_measures
 
 #: Figure 3 example (Eq 9): KJ [Nm/rad], q_rest [rad], τ = τ0 [s], k [N/m], T [s].
 FIGURE3 = dict(KJ=np.diag([0.5, 1.5, 2.0]), q_rest=np.deg2rad([5.0, 0.0, 0.0]), tau0=0.08, tau=0.08,

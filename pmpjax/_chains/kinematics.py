@@ -13,10 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linalg import det, from_soa, mm, to_soa
-from ._pytree import pytree_dataclass, static_field
-from ._trig import sincos
-from ._validate import as_array, check_positive, is_concrete
+from .._base.linalg import det, from_soa, mm, to_soa
+from .._base.pytree import pytree_dataclass, static_field
+from .._base.trig import sincos
+from .._base.validate import as_array, check_positive, is_concrete
 
 
 class Chain:

@@ -23,12 +23,12 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from pmpjax._linalg import det, mv, to_soa
-from pmpjax._pytree import pytree_dataclass
-from pmpjax._redundancy import pinv_apply_diag_soa, pinv_diag_lists
-from pmpjax._validate import as_array, check_positive_int, is_concrete
+from pmpjax._base.linalg import det, mv, to_soa
+from pmpjax._base.pytree import pytree_dataclass
+from pmpjax._base.validate import as_array, check_positive_int, is_concrete
+from pmpjax._pmp.redundancy import pinv_apply_diag_soa, pinv_diag_lists
 
-from ._optimise import least_squares
+from .._optimise import least_squares
 
 OK, NONFINITE, INVALID_INPUT = 0, 1, 2
 

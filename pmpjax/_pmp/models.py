@@ -15,11 +15,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._kinematics import Chain
-from ._linalg import mv, spd_inv, to_soa
-from ._pytree import pytree_dataclass, static_field
-from ._redundancy import admittance_terms_soa, lambda0_soa
-from ._validate import as_array, check_positive, check_spd
+from .._base.linalg import mv, spd_inv, to_soa
+from .._base.pytree import pytree_dataclass, static_field
+from .._base.validate import as_array, check_positive, check_spd
+from .._chains.kinematics import Chain
+from .redundancy import admittance_terms_soa, lambda0_soa
 
 
 class _PMP:

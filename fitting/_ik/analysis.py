@@ -10,10 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._pytree import pytree_dataclass
-from pmpjax._validate import as_array
+from pmpjax._base.pytree import pytree_dataclass
+from pmpjax._base.validate import as_array
 
-from ._ik_weights import estimate_ik_weights
+from .weights import estimate_ik_weights
 
 
 def ik_decomposition(qdot, xdot, J, w):

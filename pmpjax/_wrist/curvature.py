@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._validate import as_array
+from .._base.validate import as_array
 
 
 def curvature_areas(path, start, end):

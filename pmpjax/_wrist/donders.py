@@ -16,11 +16,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._equilibria import equilibrium_posture
-from ._kinematics import Wrist
-from ._orientation import rotvec_from_joint_angles
-from ._pytree import pytree_dataclass
-from ._validate import as_array
+from .._base.pytree import pytree_dataclass
+from .._base.validate import as_array
+from .._chains.kinematics import Wrist
+from .._pmp.equilibria import equilibrium_posture
+from .orientation import rotvec_from_joint_angles
 
 SCREEN_HALF_ANGLE_DEG = 20.0  # the pointing area of the Donders experiments: ±20°
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._arm import JOINTS, ArmTrajectory
-from ._primitives import Moves, force_field, summed_moves
+from .arm import JOINTS, ArmTrajectory
+from .primitives import Moves, force_field, summed_moves
 
 
 def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):

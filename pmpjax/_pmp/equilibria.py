@@ -30,10 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._kinematics import Chain
-from ._linalg import spd_solve
-from ._pytree import pytree_dataclass
-from ._validate import as_array, check_positive, check_positive_int, check_spd
+from .._base.linalg import spd_solve
+from .._base.pytree import pytree_dataclass
+from .._base.validate import as_array, check_positive, check_positive_int, check_spd
+from .._chains.kinematics import Chain
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
 
@@ -73,7 +73,7 @@ def _kkt_solve(H, J, a, b):
     ``M dq − Jᵀ λ = a + ρ Jᵀ b`` with ``M = H + ρ JᵀJ``, which is positive definite whenever the
     reduced Hessian is (Debreu), so ``dq = u + V λ`` with ``u = M⁻¹ (a + ρ Jᵀ b)``,
     ``V = M⁻¹ Jᵀ``, and ``(J V) λ = b − J u`` (m×m Schur complement). Both solves are the
-    unrolled closed forms / LDLᵀ of :func:`pmpjax._linalg.spd_solve`: elementwise under ``vmap``
+    unrolled closed forms / LDLᵀ of :func:`pmpjax._base.linalg.spd_solve`: elementwise under ``vmap``
     (XLA fuses them; no batched tiny LAPACK calls), and the factors are computed once for all ``k``
     columns — under ``jacfwd`` (a vmap over tangents) it depends on primals only and is shared
     by every tangent. ``ρ = 10 m |H|_F / |J|_F²`` balances the two blocks of ``M``.

@@ -17,11 +17,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._arm import CogArm
-from ._mjcf_chain import MjcfChain, gravity_gradient, gravity_terms, site_position
-from ._pytree import pytree_dataclass
-from ._redundancy import weighted_pinv
-from ._validate import as_array, check_positive, is_concrete
+from .._base.pytree import pytree_dataclass
+from .._base.validate import as_array, check_positive, is_concrete
+from .._chains.mjcf import MjcfChain, gravity_gradient, gravity_terms, site_position
+from .._pmp.redundancy import weighted_pinv
+from .arm import CogArm
 
 # ----------------------------------------------------------------------------------------------
 # Primitives and their combination

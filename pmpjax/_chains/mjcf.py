@@ -17,12 +17,12 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from ._kinematics import Chain
-from ._pytree import pytree_dataclass, static_field
+from .._base.pytree import pytree_dataclass, static_field
+from .kinematics import Chain
 
 
 def _mj_model(xml_or_model) -> mujoco.MjModel:
-    from ._arm import CogArm, _as_mj_model
+    from .._springy_arm.arm import CogArm, _as_mj_model
 
     if isinstance(xml_or_model, CogArm):
         return xml_or_model.mj_model

@@ -10,13 +10,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._integrate import integrate
-from ._linalg import det, mm, mv, to_soa
-from ._models import _PMP
-from ._planners import Planner
-from ._pytree import pytree_dataclass, replace
-from ._redundancy import admittance_terms_soa
-from ._validate import as_array, check_positive_int, is_concrete
+from .._base.linalg import det, mm, mv, to_soa
+from .._base.pytree import pytree_dataclass, replace
+from .._base.validate import as_array, check_positive_int, is_concrete
+from .integrate import integrate
+from .models import _PMP
+from .planners import Planner
+from .redundancy import admittance_terms_soa
 
 OK, NONFINITE, SINGULAR = 0, 1, 2
 

@@ -35,17 +35,17 @@ import os
 
 import numpy as np
 
-from ._donders import SCREEN_HALF_ANGLE_DEG
-from ._equilibria import equilibrium_posture
-from ._kinematics import Wrist
-from ._orientation import (
+from .._base.validate import check_finite_masked, check_positive_int
+from .._chains.kinematics import Wrist
+from .._pmp.equilibria import equilibrium_posture
+from .donders import SCREEN_HALF_ANGLE_DEG
+from .orientation import (
     joint_angles_from_quat,
     matrix_from_rotvec,
     quat_from_joint_angles,
     quat_from_matrix,
     wrist_rotation,
 )
-from ._validate import check_finite_masked, check_positive_int
 
 FORMAT = "pmpjax donders v1"
 _QUAT_COLS = ("qw", "qx", "qy", "qz")

@@ -1,0 +1,55 @@
+"""One status vocabulary for every result type (trajectories, equilibria, fits, primitives).
+
+Results carry an integer array ``status`` with one of the codes below (so it can live inside
+``jit``/``vmap``); ``converged`` / ``ok`` are derived from it (``status == SUCCESSFUL``) and
+``status_message(code)`` says what a code means. Modelled on optimistix ``RESULTS``.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+
+class Status(enum.IntEnum):
+    """Outcome of one item (one trajectory, equilibrium, subject's fit, ...)."""
+
+    SUCCESSFUL = 0
+    NONFINITE = 1
+    MAX_STEPS = 2
+    SINGULAR = 3
+    STALLED = 4
+    SCHEDULE_END = 5
+    INVALID_INPUT = 6
+    TOO_FEW_DATA = 7
+
+    @property
+    def message(self) -> str:
+        return _MESSAGES[self]
+
+
+_MESSAGES = {
+    Status.SUCCESSFUL: "successful: converged to tolerance (or completed without problems)",
+    Status.NONFINITE: "non-finite values (NaN or inf) appeared",
+    Status.MAX_STEPS: "reached the maximum number of steps without meeting the tolerance",
+    Status.SINGULAR: "came within the tolerance of a singular posture (rank-deficient Jacobian)",
+    Status.STALLED: "stalled: the iterates stopped moving (a fixed point) before the tolerance was met",
+    Status.SCHEDULE_END: "the schedule ended (e.g. the null-space ratio γ reached 1) before the tolerance was met",
+    Status.INVALID_INPUT: "input rejected (NaN/inf samples, rank-deficient Jacobians or out of range)",
+    Status.TOO_FEW_DATA: "too few valid samples to fit",
+}
+
+
+def status_message(code) -> str | list:
+    """Message for a status code, or a nested list of messages for an array of codes."""
+    arr = np.asarray(code)
+    if arr.ndim == 0:
+        return Status(int(arr)).message
+    return [status_message(c) for c in arr]
+
+
+def status_counts(status) -> dict[str, int]:
+    """``{name: count}`` over an array of codes (names of codes that occur only)."""
+    vals, counts = np.unique(np.asarray(status).reshape(-1), return_counts=True)
+    return {Status(int(v)).name: int(c) for v, c in zip(vals, counts)}

@@ -1,0 +1,59 @@
+"""The public face: every entry point of ``pmpjax`` and ``fitting`` has a bad-input test.
+
+A bad-input test is any test marked ``@pytest.mark.bad_input("pj.name", "fitting.name", ...)``
+(in any ``tests/test_*.py``); it must check that a bad argument raises a clear error naming it.
+This test fails when a public name is neither marked anywhere nor listed in ``NOT_ENTRY_POINTS``
+(result containers, constants and abstract bases, which take no user input of their own).
+"""
+
+import ast
+import inspect
+from pathlib import Path
+
+import fitting
+import pmpjax as pj
+
+TESTS = Path(__file__).parent
+
+#: Result containers, constants, enums and abstract bases: constructed by the library, not users.
+NOT_ENTRY_POINTS = {
+    "pj.ArmEquilibrium", "pj.ArmTrajectory", "pj.Chain", "pj.DIRECTIONS", "pj.DondersSurface",
+    "pj.Equilibrium", "pj.FIGURE3", "pj.Planner", "pj.ReflexNetwork", "pj.Status", "pj.SmoothedPath",
+    "pj.Subject", "pj.Trajectory", "pj.HugmpSubject", "pj.DondersRecording",
+    "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",
+    "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
+    "fitting.StiffnessFit",
+}
+
+
+def public_names():
+    out = set()
+    for mod, prefix in ((pj, "pj"), (fitting, "fitting")):
+        for name in dir(mod):
+            if name.startswith("_") or inspect.ismodule(getattr(mod, name)):
+                continue
+            out.add(f"{prefix}.{name}")
+    return out
+
+
+def _is_bad_input_mark(func) -> bool:
+    return isinstance(func, ast.Attribute) and func.attr == "bad_input"
+
+
+def marked_names():
+    names = set()
+    for path in TESTS.glob("test_*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and _is_bad_input_mark(node.func):
+                names.update(a.value for a in node.args if isinstance(a, ast.Constant))
+    return names
+
+
+def test_every_public_entry_point_has_a_bad_input_test():
+    missing = sorted(public_names() - marked_names() - NOT_ENTRY_POINTS)
+    assert not missing, f"public names without a @pytest.mark.bad_input test: {missing}"
+
+
+def test_marks_name_real_public_names():
+    unknown = sorted(marked_names() - public_names())
+    assert not unknown, f"bad_input marks name things that are not public: {unknown}"
