@@ -80,7 +80,7 @@ def test_malformed_mat_files(tmp_path, dataset):
 def test_hugmp_loader_reports_irregular_cells():
     for s in (1, 2, 3, 4):
         sub = pj.load_hugmp(s)
-        raw = scipy.io.loadmat(pj._matdata.hugmp_directory() / f"S0{s}_trajs.mat")["tasks"]
+        raw = scipy.io.loadmat(pj._data.matlab.hugmp_directory() / f"S0{s}_trajs.mat")["tasks"]
         empty = [(r + 1, t + 1) for r in range(raw.shape[0]) for t in range(6) if raw[r, t].size == 0]
         assert [(r, t) for r, t, why in sub.skipped if why == "empty cell"] == empty
         n_raw = sum(raw[r, t].size for r in range(raw.shape[0]) for t in range(6))

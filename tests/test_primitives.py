@@ -16,7 +16,8 @@ from scipy import integrate
 
 import fitting
 import pmpjax as pj
-from pmpjax import _arm, _reflexes
+from pmpjax._springy_arm import arm as _arm
+from pmpjax._springy_arm import reflexes as _reflexes
 
 N_EQ = 64  # one equilibrium batch shape for the whole module
 
