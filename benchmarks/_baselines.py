@@ -333,8 +333,10 @@ def machine() -> str:
 
 
 def write_results(name: str, res: dict) -> str:
-    """Write ``res`` to ``benchmarks/results/<name>.json``; returns the path."""
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", f"{name}.json")
+    """Write ``res`` to ``<results>/<name>.json``; returns the path. ``<results>`` is
+    ``$PMPJAX_BENCH_RESULTS`` (set by ``python -m benchmarks``) or ``benchmarks/results``."""
+    default = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+    path = os.path.join(os.environ.get("PMPJAX_BENCH_RESULTS") or default, f"{name}.json")
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, "w") as f:
         json.dump(res, f, indent=1)
