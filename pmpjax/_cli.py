@@ -334,6 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-progress", action="store_true", help="no progress display")
     rep.add_argument("--no-cache", action="store_true", help="no persistent JAX compilation cache")
     rep.set_defaults(func=_reproduce_cmd)
+    from ._config import add_simulate_command
+
+    add_simulate_command(sub)
     for name, ep in _commands().items():
         ep.load()(sub)
     return parser

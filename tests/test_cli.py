@@ -101,3 +101,68 @@ def test_command_line_bad_input_is_one_line_and_exit_2(capsys):
     assert _cli.main(["reproduce", "--only", "no_such_part", "--no-cache"]) == 2
     err = capsys.readouterr().err
     assert "no_such_part" in err and "Traceback" not in err
+
+
+def _example(name):
+    from importlib import resources
+
+    return str(resources.files("pmpjax") / "data" / "examples" / name)
+
+
+def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys):
+
+    assert _cli.main(["simulate", _example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert len(s["targets"]) == 8 and max(s["final_task_error"]) < 1e-6
+    lines = (tmp_path / "trajectories.csv").read_text().splitlines()
+    assert lines[0] == "target,t,q0,q1,q2,x0,x1" and len(lines) == 1 + 8 * 41
+    assert (tmp_path / "paths.png").read_bytes()[:8] == PNG_MAGIC
+
+
+def test_simulate_command_ends_in_the_donders_posture(tmp_path):
+    """A long movement ends where ½ (q − q_rest)ᵀ KJ (q − q_rest) is least on the target
+    (SciPy SLSQP on the paper's Eq 6, written out here)."""
+    import numpy as np
+    from scipy.optimize import minimize
+
+    KJ, q_rest, target = np.diag([0.5, 1.5, 2.0]), np.deg2rad([5.0, 0, 0]), np.array([0.15, 0.1])
+    cfg = tmp_path / "long.json"
+    cfg.write_text(json.dumps({
+        "model": {"KJ": KJ.tolist(), "q_rest": q_rest.tolist(), "tau0": 0.08},
+        "planner": {"type": "arimoto", "k": 22.5, "tau": 0.08},
+        "simulation": {"q0_deg": [0, 10, -5], "targets": [target.tolist()], "duration": 1.6, "dt": 0.002,
+                       "save_every": 100},
+    }))
+    assert _cli.main(["simulate", str(cfg), "--out", str(tmp_path / "o")]) == 0
+    q_end = np.asarray(json.loads((tmp_path / "o" / "summary.json").read_text())["final_q"][0])
+
+    def fk(q):  # R = Rx(−q_PS) Rz(q_FE) Ry(q_RUD); x = [[0, −1, 0], [0, 0, 1]] R e_x (d = 1)
+        cx, sx = np.cos(-q[0]), np.sin(-q[0])
+        cz, sz = np.cos(q[1]), np.sin(q[1])
+        cy, sy = np.cos(q[2]), np.sin(q[2])
+        Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+        Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+        Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+        v = Rx @ Rz @ Ry @ np.array([1.0, 0, 0])
+        return np.array([-v[1], v[2]])
+
+    ref = minimize(lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), q_rest, method="SLSQP",
+                   constraints=[{"type": "eq", "fun": lambda q: fk(q) - target}],
+                   options={"ftol": 1e-15, "maxiter": 1000}).x
+    assert np.linalg.norm(fk(ref) - target) < 1e-10
+    np.testing.assert_allclose(q_end, ref, atol=2e-6)
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[model]\nKJ = [[1, 2], [3\n", "bad.toml"),
+    ("[model]\nKJ_diag = [1, 2]\n", "model.KJ_diag"),
+    ("[model]\nKJ_diag = [1, 1, 1]\n[simulation]\nduration = -1\n", "simulation.duration"),
+    ("[model]\nKJ = [[1, 2, 0], [0, 1, 0], [0, 0, 1]]\n", "KJ"),
+    ("[chain]\ntype = 'hand'\n", "chain.type"),
+])
+def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, key):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    assert _cli.main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and key in err and "Traceback" not in err
