@@ -198,7 +198,7 @@ BAD_CSV = {
     "empty": ("", "empty file"),
     "header only": ("subject,sample,qw,qx,qy,qz,x1,x2\n", "no samples"),
     "missing column": ("subject,sample,qw,qx,qy,x1,x2\ns,0,1,0,0,0,0\n", "lacks column"),
-    "non-numeric": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,zero,0,0,0\n", "non-numeric"),
+    "non-numeric": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,zero,0,0,0\n", r"line 2, column 5 \(qy\): not a number"),
     "nan": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0,nan,0\n", "NaN"),
     "short row": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0\n", "expected 8 fields"),
     "duplicate": ("subject,sample,qw,qx,qy,qz,x1,x2\ns,0,1,0,0,0,0,0\ns,0,1,0,0,0,0,0\n", "duplicate sample"),

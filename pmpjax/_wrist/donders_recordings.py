@@ -262,7 +262,7 @@ def _read_csv(path):
                     d = float(body[2:])
                 except ValueError as e:
                     raise ValueError(
-                        f"{path}:{ln}: bad distance comment {s!r} (expected '# d=<metres>')"
+                        f"{path}: line {ln}: bad distance comment {s!r} (expected '# d=<metres>')"
                     ) from e
             continue
         lines.append((ln, line))
@@ -271,7 +271,7 @@ def _read_csv(path):
     rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines))))
     header = [h.strip().lower() for h in rows[0]]
     if len(set(header)) != len(header):
-        raise ValueError(f"{path}:{lines[0][0]}: duplicate column names in header {header}")
+        raise ValueError(f"{path}: line {lines[0][0]}: duplicate column names in header {header}")
     col = {h: i for i, h in enumerate(header)}
     has_q = all(c in col for c in _QUAT_COLS)
     has_j = all(c in col for c in _JOINT_COLS)
@@ -279,7 +279,7 @@ def _read_csv(path):
     missing = [c for c in need if c not in col]
     if missing or not (has_q or has_j):
         raise ValueError(
-            f"{path}:{lines[0][0]}: header {header} lacks column(s) "
+            f"{path}: line {lines[0][0]}: header {header} lacks column(s) "
             f"{missing + ([] if has_q or has_j else ['qw,qx,qy,qz or q_ps,q_fe,q_rud'])}"
         )
     if len(rows) == 1:
@@ -288,23 +288,28 @@ def _read_csv(path):
     data: dict[str, dict[int, tuple]] = {}
     for (ln, _), row in zip(lines[1:], rows[1:]):
         if len(row) != len(header):
-            raise ValueError(f"{path}:{ln}: expected {len(header)} fields, got {len(row)}")
+            raise ValueError(f"{path}: line {ln}: expected {len(header)} fields, got {len(row)}")
         name = row[col["subject"]].strip()
         if not name:
-            raise ValueError(f"{path}:{ln}: empty subject name")
+            raise ValueError(f"{path}: line {ln}: empty subject name")
         try:
             sample = int(row[col["sample"]])
         except ValueError as e:
-            raise ValueError(f"{path}:{ln}: `sample` must be an integer, got {row[col['sample']]!r}") from e
-        try:
-            ori = [float(row[col[c]]) for c in ori_cols]
-            x = [float(row[col[c]]) for c in ("x1", "x2")]
-        except ValueError as e:
-            raise ValueError(f"{path}:{ln}: non-numeric value ({e})") from e
-        if not np.all(np.isfinite(ori + x)):
-            raise ValueError(f"{path}:{ln}: NaN or inf in orientation/pointing columns")
+            raise ValueError(f"{path}: line {ln}, column {col['sample'] + 1} (sample): must be an integer, "
+                             f"got {row[col['sample']]!r}") from e
+        vals = []
+        for c in (*ori_cols, "x1", "x2"):
+            try:
+                v = float(row[col[c]])
+            except ValueError:
+                raise ValueError(f"{path}: line {ln}, column {col[c] + 1} ({c}): not a number: "
+                                 f"{row[col[c]]!r}") from None
+            if not np.isfinite(v):
+                raise ValueError(f"{path}: line {ln}, column {col[c] + 1} ({c}): NaN or inf")
+            vals.append(v)
+        ori, x = vals[: len(ori_cols)], vals[len(ori_cols):]
         if sample in data.setdefault(name, {}):
-            raise ValueError(f"{path}:{ln}: duplicate sample {sample} for subject {name!r}")
+            raise ValueError(f"{path}: line {ln}: duplicate sample {sample} for subject {name!r}")
         data[name][sample] = (ori, x)
     subjects = tuple(data)
     N = max(len(v) for v in data.values())

@@ -1,0 +1,206 @@
+"""Subcommands of ``pmpjax`` for users' own files (entry-point group ``pmpjax.commands``).
+
+Each ``add_<name>(subparsers)`` adds a parser whose ``func(args) -> int`` runs the command.
+Readers name the file, line and column of bad input; the command line prints one line and exits
+with status 2 (see ``pmpjax._cli``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def _x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+# ----------------------------------------------------------------------------- fit-donders
+
+
+def add_fit_donders(sub) -> None:
+    p = sub.add_parser(
+        "fit-donders", help="fit KJ and q_rest per subject to steady wrist postures (Donders' law, NIO)",
+        description="Fit joint stiffness KJ (SPD, trace 4) and rest posture q_rest of every subject in a "
+        "Donders recording (CSV or NPZ, see pmpjax.read_recordings) by nonlinear inverse optimisation.",
+    )
+    p.add_argument("file", help="Donders recording (.csv or .npz)")
+    p.add_argument("--out", default="out_donders", help="output folder (default out_donders)")
+    p.add_argument("--starts", type=int, default=4, help="LM starts per subject (default 4)")
+    p.set_defaults(func=_fit_donders)
+
+
+def _fit_donders(args) -> int:
+    _x64()
+    import pmpjax as pj
+
+    from ._donders import fit_donders
+
+    rec = pj.read_recordings(args.file)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    wrist = pj.Wrist(d=float(rec.d))
+    fit = fit_donders(wrist, rec.pointing, pj.joint_angles_from_quat(rec.quat), mask=rec.mask,
+                      n_starts=args.starts)
+    rows = []
+    for i, s in enumerate(rec.subjects):
+        K, q = np.asarray(fit.KJ[i]), np.asarray(fit.q_rest[i])
+        rows.append({
+            "subject": s, "converged": bool(fit.converged[i]), "status": pj.status_message(int(fit.status[i])),
+            **{f"KJ_{a}{b}": f"{K[a, b]:.6g}" for a in range(3) for b in range(a, 3)},
+            **{f"q_rest_{j}_deg": f"{np.rad2deg(q[k]):.4g}" for k, j in enumerate(("ps", "fe", "rud"))},
+            "rms_torsion_deg": f"{np.rad2deg(float(fit.rms[i])):.4g}",
+            "samples": int(np.asarray(rec.mask[i]).sum()),
+        })
+    _write_csv(out / "donders_fit.csv", rows)
+    (out / "donders_fit.json").write_text(json.dumps(
+        {"file": str(args.file), "subjects": list(map(str, rec.subjects)), "KJ": np.asarray(fit.KJ).tolist(),
+         "q_rest": np.asarray(fit.q_rest).tolist(), "converged": np.asarray(fit.converged).tolist(),
+         "report": [fit.report(i) for i in range(len(rec.subjects))]}, indent=2))
+    n_ok = int(np.asarray(fit.converged).sum())
+    print(f"{n_ok}/{len(rows)} subjects converged; wrote {out / 'donders_fit.csv'} and donders_fit.json")
+    return 0 if n_ok == len(rows) else 1
+
+
+# ----------------------------------------------------------------------------- ik-weights
+
+
+def read_ik_file(path) -> dict:
+    """Arrays ``qdot (B, K, n)``, ``xdot (B, K, m)``, ``J (B, K, m, n)``, ``mask (B, K)``, ``labels``
+    from the paper's ``.mat`` layout, an NPZ with those arrays, or a CSV (columns ``item``,
+    ``qdot_1..n``, ``xdot_1..m``, ``J_r_c`` row-major; one row per sample)."""
+    import pmpjax as pj
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        arr = pj.ik_dataset_arrays(pj.load_ik_dataset(path))
+        lead = arr["qdot"].shape[:3]  # participants × conditions × targets; trials and samples pooled
+        n, m = arr["qdot"].shape[-1], arr["xdot"].shape[-1]
+        labels = [f"participant {a + 1} / {c} / target {t}" for a in range(lead[0])
+                  for c in arr["conditions"] for t in arr["targets"]]
+        return {"qdot": arr["qdot"].reshape(-1, np.prod(arr["qdot"].shape[3:5]), n),
+                "xdot": arr["xdot"].reshape(-1, np.prod(arr["xdot"].shape[3:5]), m),
+                "J": arr["J"].reshape(-1, np.prod(arr["J"].shape[3:5]), m, n),
+                "mask": arr["mask"].reshape(-1, np.prod(arr["mask"].shape[3:5])), "labels": labels}
+    if suffix == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in ("qdot", "xdot", "J") if k not in z.files]
+            if missing:
+                raise ValueError(f"{path}: missing array(s) {missing} (found {z.files})")
+            qd, xd, J = (np.asarray(z[k], float) for k in ("qdot", "xdot", "J"))
+            mask = np.asarray(z["mask"], bool) if "mask" in z.files else np.ones(qd.shape[:-1], bool)
+        if qd.ndim == 2:
+            qd, xd, J, mask = qd[None], xd[None], J[None], mask[None]
+        return {"qdot": qd, "xdot": xd, "J": J, "mask": mask, "labels": [f"item {i}" for i in range(len(qd))]}
+    if suffix == ".csv":
+        return _read_ik_csv(path)
+    raise ValueError(f"{path}: unknown format {suffix!r} (expected .mat, .npz or .csv)")
+
+
+def _read_ik_csv(path: Path) -> dict:
+    with path.open(newline="") as f:
+        lines = [(i + 1, ln) for i, ln in enumerate(f.read().splitlines()) if ln.strip() and not ln.startswith("#")]
+    if not lines:
+        raise ValueError(f"{path}: empty file")
+    header = [h.strip() for h in next(csv.reader([lines[0][1]]))]
+    qcols = sorted((h for h in header if h.startswith("qdot_")), key=lambda h: int(h.split("_")[1]))
+    xcols = sorted((h for h in header if h.startswith("xdot_")), key=lambda h: int(h.split("_")[1]))
+    n, m = len(qcols), len(xcols)
+    jcols = [f"J_{r + 1}_{c + 1}" for r in range(m) for c in range(n)]
+    missing = [h for h in ["item", *jcols] if h not in header]
+    if not n or not m or missing:
+        raise ValueError(f"{path}: line {lines[0][0]}: header needs item, qdot_1..n, xdot_1..m and J_r_c "
+                         f"columns; missing {missing or 'qdot_/xdot_ columns'}")
+    idx = {h: header.index(h) for h in header}
+    items: dict[str, list] = {}
+    for lineno, ln in lines[1:]:
+        cells = next(csv.reader([ln]))
+        if len(cells) != len(header):
+            raise ValueError(f"{path}: line {lineno}: {len(cells)} fields, header has {len(header)}")
+        vals = []
+        for h in (*qcols, *xcols, *jcols):
+            try:
+                v = float(cells[idx[h]])
+            except ValueError:
+                raise ValueError(f"{path}: line {lineno}, column {idx[h] + 1} ({h}): not a number: "
+                                 f"{cells[idx[h]]!r}") from None
+            if not np.isfinite(v):
+                raise ValueError(f"{path}: line {lineno}, column {idx[h] + 1} ({h}): NaN or inf")
+            vals.append(v)
+        items.setdefault(cells[idx["item"]], []).append(vals)
+    K = max(len(v) for v in items.values())
+    B = len(items)
+    qd, xd, J = np.zeros((B, K, n)), np.zeros((B, K, m)), np.broadcast_to(np.eye(m, n), (B, K, m, n)).copy()
+    mask = np.zeros((B, K), bool)
+    for b, rows in enumerate(items.values()):
+        a = np.asarray(rows)
+        k = len(a)
+        qd[b, :k], xd[b, :k], J[b, :k] = a[:, :n], a[:, n:n + m], a[:, n + m:].reshape(k, m, n)
+        mask[b, :k] = True
+    return {"qdot": qd, "xdot": xd, "J": J, "mask": mask, "labels": list(items)}
+
+
+def add_ik_weights(sub) -> None:
+    p = sub.add_parser(
+        "ik-weights", help="estimate IK weights (Khoramshahi et al. 2022, Algorithm 1) from a data file",
+        description=read_ik_file.__doc__.split("\n\n")[0].replace("``", "'"),
+    )
+    p.add_argument("file", help=".mat (the paper's layout), .npz or .csv")
+    p.add_argument("--gamma", type=float, default=0.6, help="null-space ratio γ in [0, 1] (default 0.6)")
+    p.add_argument("--method", choices=("algorithm1", "lm"), default="algorithm1",
+                   help="the paper's Algorithm 1 (default) or the gradient-based LM variant (exact when "
+                   "the data follow the weighted pseudo-inverse)")
+    p.add_argument("--out", default="out_ik", help="output folder (default out_ik)")
+    p.set_defaults(func=_ik_weights)
+
+
+def _ik_weights(args) -> int:
+    _x64()
+    import pmpjax as pj
+
+    from ._ik.analysis import contribution_coefficients
+    from ._ik.weights import estimate_ik_weights, estimate_ik_weights_lm
+
+    if not 0.0 <= args.gamma <= 1.0:
+        raise ValueError(f"--gamma must lie in [0, 1], got {args.gamma}")
+    d = read_ik_file(args.file)
+    if args.method == "lm":
+        res = estimate_ik_weights_lm(d["qdot"], d["xdot"], d["J"], args.gamma, mask=d["mask"])
+        error = np.asarray(res.cost)
+    else:
+        res = estimate_ik_weights(d["qdot"], d["xdot"], d["J"], args.gamma, mask=d["mask"], on_invalid="flag")
+        error = np.asarray(res.error)
+    status = np.asarray(getattr(res, "status", np.where(np.asarray(res.converged), 0, 2)))
+    w = np.asarray(res.w)
+    beta = np.asarray(contribution_coefficients(np.where(np.isfinite(w), w, 1.0)))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [{"item": lab, "status": pj.status_message(int(status[i])), "converged": bool(res.converged[i]),
+             **{f"w_{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
+             **{f"beta_{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
+             "error": f"{float(error[i]):.4g}"} for i, lab in enumerate(d["labels"])]
+    _write_csv(out / "ik_weights.csv", rows)
+    n_ok = int(np.asarray(res.converged).sum())
+    print(f"{n_ok}/{len(rows)} items converged; wrote {out / 'ik_weights.csv'}")
+    return 0
+
+
+def add_commands(sub) -> None:
+    """All of fitting's subcommands (registered as one entry point)."""
+    add_fit_donders(sub)
+    add_ik_weights(sub)
