@@ -1,17 +1,22 @@
-"""Every notebook runs top to bottom (code cells exec'd in-process, sharing compiled functions)."""
+"""Notebook harness: a notebook's code cells exec'd in-process (sharing compiled functions with
+the tests in the same worker), top to bottom; its own ``assert`` statements are the checks.
+
+Each notebook has its own tiny ``tests/test_notebook_<name>.py`` so that pytest-xdist's
+``--dist loadfile`` spreads the notebooks over the workers; ``test_every_notebook_is_tested``
+(in ``test_notebook_index.py``) fails when a notebook has no such file."""
 
 import os
 from pathlib import Path
 
 import matplotlib
 import nbformat
-import pytest
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+NOTEBOOK_DIR = Path(__file__).parent.parent / "notebooks"
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs(path, monkeypatch):
+def run_notebook(name: str, monkeypatch) -> dict:
+    """Run ``notebooks/<name>.ipynb``; returns its namespace (for further checks)."""
+    path = NOTEBOOK_DIR / f"{name}.ipynb"
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -30,3 +35,4 @@ def test_notebook_runs(path, monkeypatch):
             raise AssertionError(f"{path.name} cell {i} failed: {e!r}") from e
     plt.close("all")
     assert os.environ["PMPJAX_NOTEBOOK_TEST"] == "1"
+    return namespace
