@@ -353,7 +353,7 @@ def test_nio_joint_residual_planar_arm():
     # targets of postures spread ±0.6 rad around q_rest (a ±12 cm box would leave q_rest
     # unidentifiable: the fit then reports max_steps in a flat valley)
     targets = np.asarray(arm.fk(jnp.asarray(q_true + rng.uniform(-0.6, 0.6, size=(2, 64, 3)))))
-    q_eq = np.asarray(pj.equilibrium_posture(arm, K_true, q_true, targets))
+    q_eq = np.asarray(pj.equilibrium_posture(arm, K_true, q_true, targets).q)
     postures = q_eq + np.deg2rad(0.05) * rng.normal(size=q_eq.shape)
     res = fitting.fit_donders(arm, targets, postures, n_starts=1)
     truth = np.concatenate([fitting.params_from_stiffness(K_true), q_true])

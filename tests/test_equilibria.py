@@ -50,7 +50,7 @@ def wrist():
 
 
 def test_wrist_matches_slsqp(wrist):
-    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS, return_info=True)
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS)
     assert eq.q.shape == (4, 3) and bool(np.all(eq.converged))
     for x, q in zip(TARGETS, np.asarray(eq.q)):
         ref = _slsqp(wrist, KJ1, QR1, x, QR1)
@@ -66,7 +66,7 @@ def test_planar_arm_matches_slsqp():
     K = np.diag([2.0, 1.0, 0.5]) + 0.1
     qr = np.array([0.4, 0.8, 0.3])
     xs = np.array([[0.35, 0.3], [0.1, 0.45]])
-    q = np.asarray(pj.equilibrium_posture(arm, K, qr, xs))
+    q = np.asarray(pj.equilibrium_posture(arm, K, qr, xs).q)
     for x, qi in zip(xs, q):
         np.testing.assert_allclose(qi, _slsqp(arm, K, qr, x, qr), atol=1e-8, rtol=0)
 
@@ -84,14 +84,14 @@ def test_matches_lambda0_pmp_steady_state(wrist):
         saveat=pj.SaveAt(final=True),
     )
     q_sim = np.asarray(traj.q[:, -1])
-    q_eq = np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, x))
+    q_eq = np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, x).q)
     np.testing.assert_allclose(q_sim, q_eq, atol=1e-7)
 
 
 def test_batched_over_subjects_and_targets(wrist):
     KJs = np.stack([KJ1, np.diag([0.5, 1.5, 2.0])])
     qrs = np.stack([QR1, np.deg2rad([5.0, 0.0, 0.0])])
-    q = np.asarray(pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None]))
+    q = np.asarray(pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None]).q)
     assert q.shape == (2, 4, 3)
     for s in range(2):
         for t in range(4):
@@ -99,7 +99,7 @@ def test_batched_over_subjects_and_targets(wrist):
 
 
 def _loss(K, qr, x, chain):
-    q = pj.equilibrium_posture(chain, K, qr, x)
+    q = pj.equilibrium_posture(chain, K, qr, x).q
     return jnp.sum(jnp.sin(q) @ jnp.arange(1.0, 4.0))
 
 
@@ -141,7 +141,7 @@ def test_vmap_of_grad_equals_grad_of_sum(wrist):
 
 
 def test_not_converged_is_flagged(wrist):
-    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1, return_info=True)
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1)
     assert not bool(eq.converged)
 
 
