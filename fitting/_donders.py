@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pmpjax._base.batching import bucket, pad_rows
 from pmpjax._base.pytree import replace
 from pmpjax._base.status import Status
 from pmpjax._base.validate import as_array, check_finite_masked, check_positive_int, check_spd
@@ -378,12 +379,8 @@ def fit_donders(
     # Compiled shapes are bucketed (subjects per call: 8 or 16 unless `chunk_size` is given;
     # samples: power of two >= 64, padding masked out) so similar problems share a compile.
     chunk = int(chunk_size) if chunk_size is not None else (8 if S <= 8 else 16)
-    Np = max(64, 1 << (N - 1).bit_length())
-    if Np > N:
-        pointing, postures = (
-            np.concatenate([a, np.zeros((S, Np - N, a.shape[-1]))], 1) for a in (pointing, postures)
-        )
-        mask = np.concatenate([mask, np.zeros((S, Np - N), bool)], 1)
+    Np = bucket(N, minimum=64)
+    pointing, postures, mask = (pad_rows(a, Np, axis=1, fill="zeros") for a in (pointing, postures, mask))
 
     n_k = n * (n + 1) // 2 - 1
     w = mask.astype(float)
@@ -397,11 +394,8 @@ def fit_donders(
     outs = []
     for start in range(0, S, chunk):
         sl = slice(start, min(start + chunk, S))
-        pad = chunk - (sl.stop - sl.start)  # padded subjects repeat the last one; dropped below
-        args = [
-            np.concatenate([a[sl], np.repeat(a[sl][-1:], pad, 0)]) if pad else a[sl]
-            for a in (theta0, x, q_obs, w)
-        ]
+        # padded subjects repeat the last one; dropped below
+        args = [pad_rows(a[sl], chunk) for a in (theta0, x, q_obs, w)]
         out = jax.device_get(_fit_batch(chain, *args, **opts))
         out = {k: v[: sl.stop - sl.start] for k, v in out.items()}
         outs.append(out)
