@@ -82,7 +82,8 @@ def _solve(residual, solve, measure, max_steps, tol, step_cap, y0, params, const
         F = residual(y, params, consts)
         d = solve(y, params, consts, jax.tree_util.tree_map(jnp.negative, F))
         big = _max_abs(measure(d))
-        alpha = 1.0 if step_cap is None else jnp.minimum(1.0, step_cap / jnp.where(big > 0, big, 1.0))
+        # (a zero step in the measured part keeps alpha = 1: the rest of y still takes its full step)
+        alpha = 1.0 if step_cap is None else jnp.where(big > step_cap, step_cap / jnp.where(big > 0, big, 1.0), 1.0)
         y = jax.tree_util.tree_map(lambda a, b: a + alpha * b, y, d)
         return y, jnp.where(jnp.isnan(big), 0.0, big), it + 1
 
