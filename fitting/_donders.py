@@ -435,10 +435,11 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
 
 def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
     """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
-    ``pointing`` (..., P, 2)."""
+    ``pointing`` (..., P, 2): the first component of the rotation vector of the equilibrium
+    posture (design §3.1, §3.4). Differentiable in ``KJ``, ``q_rest`` and ``pointing``."""
     if not isinstance(chain, Wrist):
         raise TypeError(f"`chain` must be a pmpjax.Wrist, got {type(chain).__name__}")
     q = equilibrium_posture(
-        chain, np.asarray(KJ)[..., None, :, :], np.asarray(q_rest)[..., None, :], pointing
+        chain, jnp.asarray(KJ)[..., None, :, :], jnp.asarray(q_rest)[..., None, :], pointing
     ).q
     return rotvec_from_joint_angles(q)[..., 0]
