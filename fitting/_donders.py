@@ -45,8 +45,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pmpjax._base.batching import bucket, pad_rows
 from pmpjax._base.pytree import replace
-from pmpjax._base.validate import as_array, check_finite_masked, check_positive_int
+from pmpjax._base.status import Status
+from pmpjax._base.validate import as_array, check_finite_masked, check_positive_int, check_spd
 from pmpjax._chains.kinematics import Chain, Wrist
 from pmpjax._pmp.equilibria import equilibrium_one, equilibrium_posture
 from pmpjax._wrist.orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
@@ -67,6 +69,7 @@ def _sym_index(n):
 
 def stiffness_from_params(s, n: int, trace: float = 4.0):
     """``KJ`` (n, n) SPD with ``tr KJ = trace`` from ``s`` (n(n+1)/2 − 1,): ``t expm(S)/tr expm(S)``."""
+    s = _params_vector("s", s, n, n * (n + 1) // 2 - 1)
     idx = _sym_index(n)
     S = jnp.zeros((n, n), s.dtype)
     for k, (i, j) in enumerate(idx):
@@ -74,6 +77,16 @@ def stiffness_from_params(s, n: int, trace: float = 4.0):
     S = S.at[n - 1, n - 1].set(-sum(s[k] for k in range(n - 1)))
     E = _expm_sym(S)
     return trace * E / jnp.trace(E)
+
+
+def _params_vector(name, v, n, size):
+    """Shape checks (before tracing) of a parameter vector of an n-joint chain."""
+    if int(n) != n or n < 2:
+        raise ValueError(f"`n` must be an integer >= 2 (joints), got {n}")
+    v = jnp.asarray(as_array(name, v, tail=(size,)))
+    if v.ndim != 1:
+        raise ValueError(f"`{name}` must be a vector of shape ({size},) for n = {n}, got {v.shape}")
+    return v
 
 
 def _expm_sym(S, squarings: int = 6, order: int = 10):
@@ -91,8 +104,10 @@ def _expm_sym(S, squarings: int = 6, order: int = 10):
 
 
 def params_from_stiffness(KJ):
-    """Inverse of :func:`stiffness_from_params` (trace is dropped): ``S = log KJ − tr(log KJ)/n I``."""
-    KJ = np.asarray(KJ, dtype=float)
+    """Inverse of :func:`stiffness_from_params` (trace is dropped): ``S = log KJ − tr(log KJ)/n I``.
+    ``KJ`` (..., n, n) SPD; returns (..., n(n+1)/2 − 1)."""
+    KJ = np.asarray(as_array("KJ", KJ, tail=(None, None)), dtype=float)
+    check_spd("KJ", KJ)
     n = KJ.shape[-1]
     w, V = np.linalg.eigh(KJ)
     L = (V * np.log(w)[..., None, :]) @ np.swapaxes(V, -1, -2)
@@ -104,11 +119,14 @@ def donders_coefficients(params, n: int, trace: float = 4.0):
     """Coefficients ``c`` (p,) of Donders' law ``N(q)ᵀ(KJ q − b) = 0``: the free entries of ``KJ``
     (diagonal 0..n−2, then the upper triangle) and ``b = KJ q_rest`` [Nm], from ``params`` (p,)."""
     n_k = n * (n + 1) // 2 - 1
+    params = _params_vector("params", params, n, n_k + n)
     KJ = stiffness_from_params(params[:n_k], n, trace)
     return jnp.concatenate([jnp.stack([KJ[i, j] for i, j in _sym_index(n)]), KJ @ params[n_k:]])
 
 
 def _labels(chain: Chain):
+    if not isinstance(chain, Chain):
+        raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
     return _WRIST_JOINTS if isinstance(chain, Wrist) else tuple(str(i) for i in range(chain.n))
 
 
@@ -119,19 +137,12 @@ def coefficient_names(chain: Chain) -> tuple[str, ...]:
 
 
 def parameter_names(chain: Chain) -> tuple[str, ...]:
+    """Names of the fitted parameters: log-stiffness entries ``logK[i,j]`` then ``q_rest[i]``."""
     n, lab = chain.n, _labels(chain)
     return tuple(f"logK[{lab[i]},{lab[j]}]" for i, j in _sym_index(n)) + tuple(f"q_rest[{v}]" for v in lab)
 
 
 # --- result -------------------------------------------------------------------------------
-
-
-STATUS = {
-    0: "converged",
-    1: "max_steps reached",
-    2: "non-finite or equilibrium failure",
-    3: "too few samples",
-}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,8 +151,10 @@ class DondersFit:
 
     ``KJ`` (S, n, n) [Nm/rad], ``q_rest`` (S, n) [rad]; ``params`` (S, p) (see
     :func:`parameter_names`); ``loss`` (S,) ½ Σ r²; ``rms`` (S,) RMS residual [rad];
-    ``steps`` (S,) LM iterations of the best start; ``converged`` (S,) bool; ``status`` (S,) int
-    (see ``STATUS``); ``n_samples`` (S,); ``stderr`` (S, p), ``cov`` (S, p, p); ``KJ_stderr``
+    ``steps`` (S,) LM iterations of the best start; ``status`` (S,) int :class:`pmpjax.Status`
+    (``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``: no start had a finite loss or every equilibrium
+    failed, ``TOO_FEW_DATA``: no more valid samples than parameters); ``converged`` (S,) bool
+    = ``status == SUCCESSFUL``; ``n_samples`` (S,); ``stderr`` (S, p), ``cov`` (S, p, p); ``KJ_stderr``
     (S, n, n), ``q_rest_stderr`` (S, n) (delta method); ``coefficients`` (S, p) of Donders' law
     (:func:`donders_coefficients`), ``coefficient_stderr`` (S, p), ``coefficient_cov`` (S, p, p);
     ``singular_values`` (S, p) of the residual Jacobian with respect to the coefficients;
@@ -156,7 +169,6 @@ class DondersFit:
     loss: np.ndarray
     rms: np.ndarray
     steps: np.ndarray
-    converged: np.ndarray
     status: np.ndarray
     n_samples: np.ndarray
     stderr: np.ndarray
@@ -175,10 +187,14 @@ class DondersFit:
     param_names: tuple[str, ...]
     coef_names: tuple[str, ...]
 
+    @property
+    def converged(self) -> np.ndarray:
+        return self.status == Status.SUCCESSFUL
+
     def report(self, i: int = 0) -> str:
         """Human-readable identifiability report of subject ``i``."""
         lines = [
-            f"subject {i}: {STATUS[int(self.status[i])]}, {int(self.steps[i])} LM steps, "
+            f"subject {i}: {Status(int(self.status[i])).message}, {int(self.steps[i])} LM steps, "
             f"RMS residual {np.rad2deg(self.rms[i]):.3g} deg, n = {int(self.n_samples[i])}"
         ]
         lines.append("singular values of the residual Jacobian and their combinations of the coefficients "
@@ -202,9 +218,10 @@ def _residual_fn(chain, n_k, trace, kind, tol):
         x, q_obs, w = data
         KJ = stiffness_from_params(theta[:n_k], n, trace)
         qr = theta[n_k:]
-        q, _, ok, _ = jax.vmap(
+        q, _, status, _, _ = jax.vmap(
             lambda xx, q0: equilibrium_one(chain, KJ, qr, xx, q0, tol=tol, check_minimum=False)
         )(x, q_obs)
+        ok = status == Status.SUCCESSFUL
         if kind == "torsion":
             r = torsion_between(wrist_rotation(q_obs), wrist_rotation(q))
             bad = ~ok
@@ -246,14 +263,14 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
         dK = jax.jacfwd(lambda t: stiffness_from_params(t, n, trace))(r.x[:n_k])  # (n, n, n_k)
         covK = jnp.einsum("ija,ab,ijb->ij", dK, cov[:n_k, :n_k], dK)
         enough = n_valid > p
-        status = jnp.where(~enough, 3, jnp.where(~finite[best], 2, jnp.where(r.converged, 0, 1)))
+        status = jnp.where(~enough, Status.TOO_FEW_DATA,
+                           jnp.where(~finite[best], Status.NONFINITE, r.status))
         return dict(
             x=r.x,
             KJ=stiffness_from_params(r.x[:n_k], n, trace),
             cost=r.cost,
             rms=jnp.sqrt(2.0 * r.cost / jnp.maximum(n_valid, 1)),
             steps=r.steps,
-            converged=r.converged & enough & finite[best],
             status=status,
             n=n_valid,
             se=se,
@@ -362,12 +379,8 @@ def fit_donders(
     # Compiled shapes are bucketed (subjects per call: 8 or 16 unless `chunk_size` is given;
     # samples: power of two >= 64, padding masked out) so similar problems share a compile.
     chunk = int(chunk_size) if chunk_size is not None else (8 if S <= 8 else 16)
-    Np = max(64, 1 << (N - 1).bit_length())
-    if Np > N:
-        pointing, postures = (
-            np.concatenate([a, np.zeros((S, Np - N, a.shape[-1]))], 1) for a in (pointing, postures)
-        )
-        mask = np.concatenate([mask, np.zeros((S, Np - N), bool)], 1)
+    Np = bucket(N, minimum=64)
+    pointing, postures, mask = (pad_rows(a, Np, axis=1, fill="zeros") for a in (pointing, postures, mask))
 
     n_k = n * (n + 1) // 2 - 1
     w = mask.astype(float)
@@ -381,11 +394,8 @@ def fit_donders(
     outs = []
     for start in range(0, S, chunk):
         sl = slice(start, min(start + chunk, S))
-        pad = chunk - (sl.stop - sl.start)  # padded subjects repeat the last one; dropped below
-        args = [
-            np.concatenate([a[sl], np.repeat(a[sl][-1:], pad, 0)]) if pad else a[sl]
-            for a in (theta0, x, q_obs, w)
-        ]
+        # padded subjects repeat the last one; dropped below
+        args = [pad_rows(a[sl], chunk) for a in (theta0, x, q_obs, w)]
         out = jax.device_get(_fit_batch(chain, *args, **opts))
         out = {k: v[: sl.stop - sl.start] for k, v in out.items()}
         outs.append(out)
@@ -403,7 +413,6 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
         loss=o["cost"],
         rms=o["rms"],
         steps=o["steps"],
-        converged=o["converged"],
         status=o["status"],
         n_samples=o["n"],
         stderr=o["se"],
@@ -426,8 +435,11 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
 
 def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
     """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
-    ``pointing`` (..., P, 2)."""
+    ``pointing`` (..., P, 2): the first component of the rotation vector of the equilibrium
+    posture (design §3.1, §3.4). Differentiable in ``KJ``, ``q_rest`` and ``pointing``."""
+    if not isinstance(chain, Wrist):
+        raise TypeError(f"`chain` must be a pmpjax.Wrist, got {type(chain).__name__}")
     q = equilibrium_posture(
-        chain, np.asarray(KJ)[..., None, :, :], np.asarray(q_rest)[..., None, :], pointing
-    )
+        chain, jnp.asarray(KJ)[..., None, :, :], jnp.asarray(q_rest)[..., None, :], pointing
+    ).q
     return rotvec_from_joint_angles(q)[..., 0]

@@ -10,15 +10,20 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from pmpjax._base.pytree import pytree_dataclass
+from pmpjax._base.status import Status
+from pmpjax._base.validate import as_array, check_positive, check_positive_int
 
 
 @pytree_dataclass
 class LeastSquaresResult:
     """``x`` (p,) solution; ``cost`` ½|r|²; ``residual`` (N,); ``jac`` (N, p) at ``x``;
-    ``grad_norm`` |Jᵀr|_∞; ``steps`` iterations; ``converged`` bool (False also for non-finite)."""
+    ``grad_norm`` |Jᵀr|_∞; ``steps`` iterations; ``status`` int :class:`pmpjax.Status`
+    (``SUCCESSFUL``: a tolerance was met; ``NONFINITE``: the start's residual or Jacobian is not
+    finite; ``MAX_STEPS``); ``converged`` = ``status == SUCCESSFUL``."""
 
     x: jax.Array
     cost: jax.Array
@@ -26,7 +31,11 @@ class LeastSquaresResult:
     jac: jax.Array
     grad_norm: jax.Array
     steps: jax.Array
-    converged: jax.Array
+    status: jax.Array
+
+    @property
+    def converged(self) -> jax.Array:
+        return self.status == Status.SUCCESSFUL
 
 
 def least_squares(
@@ -46,9 +55,16 @@ def least_squares(
     ``|Jᵀr|_∞ <= gtol``, or an accepted step changes the cost by ``<= ftol·cost``, or the step is
     ``<= xtol (|x| + xtol)``. Non-finite trial residuals are rejected steps.
     """
-    x0 = jnp.asarray(x0, dtype=jnp.result_type(float))
+    if not callable(residual):
+        raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
+    x0 = jnp.asarray(as_array("x0", x0), dtype=jnp.result_type(float))
     if x0.ndim != 1:
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
+    max_steps = check_positive_int("max_steps", max_steps)
+    for name, v in (("gtol", gtol), ("ftol", ftol), ("xtol", xtol)):
+        if not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"`{name}` must be a finite tolerance >= 0, got {v}")
+    check_positive("damping", damping)
 
     def lin(x):
         # One pass: the residual rides along as jacfwd's aux output (no second primal solve).
@@ -92,9 +108,11 @@ def least_squares(
 
     s = lax.while_loop(cond, body, state0)
     gn = jnp.max(jnp.abs(s["J"].T @ s["r"]))
-    conv = (s["conv"] | (gn <= gtol)) & jnp.isfinite(s["cost"])
+    finite = jnp.isfinite(s["cost"]) & jnp.all(jnp.isfinite(s["J"]))
+    conv = s["conv"] | (gn <= gtol)
+    status = jnp.where(~finite, Status.NONFINITE, jnp.where(conv, Status.SUCCESSFUL, Status.MAX_STEPS))
     return LeastSquaresResult(x=s["x"], cost=s["cost"], residual=s["r"], jac=s["J"], grad_norm=gn,
-                              steps=s["step"], converged=conv)
+                              steps=s["step"], status=status)
 
 
 def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):
@@ -104,6 +122,10 @@ def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):
     directions with singular value below ``rcond·s_max`` are unidentifiable (infinite variance is
     replaced by the pseudo-inverse's zero there — check the singular values). Vmappable.
     """
+    if not isinstance(result, LeastSquaresResult):
+        raise TypeError(f"`result` must be a LeastSquaresResult, got {type(result).__name__}")
+    if not (np.isfinite(rcond) and 0 <= rcond < 1):
+        raise ValueError(f"`rcond` must be in [0, 1), got {rcond}")
     J = result.jac
     N, p = J.shape
     U, s, Vt = jnp.linalg.svd(J, full_matrices=False)

@@ -4,12 +4,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _problems import KJ_S1 as KJ1
+from _problems import PLANAR_KJ, PLANAR_L, PLANAR_Q_REST
+from _problems import QREST_S1 as QR1
+from _reference import central_diff, symmetric_directions
 from scipy.optimize import minimize
 
 import pmpjax as pj
 
-KJ1 = np.array([[1.22, 0.07, 0.08], [0.07, 1.68, 0.03], [0.08, 0.03, 1.09]])  # Table 1, subj 1
-QR1 = np.array([0.26, -0.08, 0.13])
 TARGETS = np.array([[0.0, 0.0], [0.25, -0.1], [-0.3, 0.3], [0.1, 0.33]])
 
 
@@ -50,8 +52,10 @@ def wrist():
 
 
 def test_wrist_matches_slsqp(wrist):
-    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS, return_info=True)
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS)
     assert eq.q.shape == (4, 3) and bool(np.all(eq.converged))
+    assert np.all(np.asarray(eq.status) == pj.Status.SUCCESSFUL) and np.all(np.asarray(eq.steps) < 10)
+    assert np.all(np.asarray(eq.kkt_residual) < 1e-12)
     for x, q in zip(TARGETS, np.asarray(eq.q)):
         ref = _slsqp(wrist, KJ1, QR1, x, QR1)
         np.testing.assert_allclose(q, ref, atol=1e-8, rtol=0)
@@ -62,11 +66,10 @@ def test_wrist_matches_slsqp(wrist):
 
 
 def test_planar_arm_matches_slsqp():
-    arm = pj.PlanarArm([0.3, 0.25, 0.15])
-    K = np.diag([2.0, 1.0, 0.5]) + 0.1
-    qr = np.array([0.4, 0.8, 0.3])
+    arm = pj.PlanarArm(PLANAR_L)
+    K, qr = PLANAR_KJ, PLANAR_Q_REST
     xs = np.array([[0.35, 0.3], [0.1, 0.45]])
-    q = np.asarray(pj.equilibrium_posture(arm, K, qr, xs))
+    q = np.asarray(pj.equilibrium_posture(arm, K, qr, xs).q)
     for x, qi in zip(xs, q):
         np.testing.assert_allclose(qi, _slsqp(arm, K, qr, x, qr), atol=1e-8, rtol=0)
 
@@ -84,14 +87,14 @@ def test_matches_lambda0_pmp_steady_state(wrist):
         saveat=pj.SaveAt(final=True),
     )
     q_sim = np.asarray(traj.q[:, -1])
-    q_eq = np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, x))
+    q_eq = np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, x).q)
     np.testing.assert_allclose(q_sim, q_eq, atol=1e-7)
 
 
 def test_batched_over_subjects_and_targets(wrist):
     KJs = np.stack([KJ1, np.diag([0.5, 1.5, 2.0])])
     qrs = np.stack([QR1, np.deg2rad([5.0, 0.0, 0.0])])
-    q = np.asarray(pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None]))
+    q = np.asarray(pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None]).q)
     assert q.shape == (2, 4, 3)
     for s in range(2):
         for t in range(4):
@@ -99,12 +102,8 @@ def test_batched_over_subjects_and_targets(wrist):
 
 
 def _loss(K, qr, x, chain):
-    q = pj.equilibrium_posture(chain, K, qr, x)
+    q = pj.equilibrium_posture(chain, K, qr, x).q
     return jnp.sum(jnp.sin(q) @ jnp.arange(1.0, 4.0))
-
-
-def _fd(f, x, dirs, h=1e-6):
-    return np.array([(f(x + h * d) - f(x - h * d)) / (2 * h) for d in dirs])
 
 
 @pytest.mark.parametrize("mode", ["rev", "fwd"])
@@ -114,20 +113,12 @@ def test_gradients_match_central_differences(wrist, mode):
     gK, gq, gx = diff(_loss, argnums=(0, 1, 2))(jnp.asarray(KJ1), jnp.asarray(QR1), jnp.asarray(x), wrist)
     f = lambda K, qr, xx: float(_loss(K, qr, xx, wrist))  # noqa: E731
     # KJ: symmetric perturbation directions (the solver validates symmetry)
-    sym = []
-    for i in range(3):
-        for j in range(i, 3):
-            E = np.zeros((3, 3))
-            E[i, j] = E[j, i] = 1.0
-            sym.append(E)
-    fdK = _fd(lambda K: f(K, QR1, x), KJ1, sym)
+    sym = symmetric_directions(3)
+    fdK = central_diff(lambda K: f(K, QR1, x), KJ1, sym)
     np.testing.assert_allclose([np.sum(np.asarray(gK) * E) for E in sym], fdK, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(gq), central_diff(lambda q: f(KJ1, q, x), QR1), rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(
-        np.asarray(gq), _fd(lambda q: f(KJ1, q, x), QR1, np.eye(3)), rtol=1e-6, atol=1e-8
-    )
-    dirs = np.eye(4).reshape(4, 2, 2)
-    np.testing.assert_allclose(
-        np.asarray(gx).reshape(-1), _fd(lambda xx: f(KJ1, QR1, xx), x, dirs), rtol=1e-6, atol=1e-8
+        np.asarray(gx).reshape(-1), central_diff(lambda xx: f(KJ1, QR1, xx), x), rtol=1e-6, atol=1e-8
     )
 
 
@@ -141,8 +132,35 @@ def test_vmap_of_grad_equals_grad_of_sum(wrist):
 
 
 def test_not_converged_is_flagged(wrist):
-    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1, return_info=True)
-    assert not bool(eq.converged)
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1)
+    assert not bool(eq.converged) and int(eq.status) == pj.Status.MAX_STEPS and int(eq.steps) == 1
+
+
+def test_maximum_is_flagged_not_minimum():
+    """Task ``q1² + q2² = 1`` (a circle), energy ``½ qᵀ diag(1, 2) q``: its minima on the circle are
+    ``(±1, 0)``, its maxima ``(0, ±1)``. Newton started at a maximum stays there (a KKT point) and the
+    second-order test flags it; started nearby elsewhere it finds the minimum."""
+    circle = pj.FunctionChain(lambda q: jnp.stack([q[0] ** 2 + q[1] ** 2]), n=2, m=1)
+    K = np.diag([1.0, 2.0])
+    eq = pj.equilibrium_posture(circle, K, np.zeros(2), np.ones(1), q_init=np.array([0.0, 1.0]))
+    np.testing.assert_allclose(np.asarray(eq.q), [0.0, 1.0], atol=1e-14)
+    assert int(eq.status) == pj.Status.NOT_MINIMUM and not bool(eq.converged)
+    eq = pj.equilibrium_posture(circle, K, np.zeros(2), np.ones(1), q_init=np.array([0.6, 0.5]))
+    np.testing.assert_allclose(np.asarray(eq.q), [1.0, 0.0], atol=1e-12)
+    assert bool(eq.converged)
+
+
+def test_batch_equals_singles(wrist):
+    """One broadcast call (2 subjects × 3 targets) equals six single calls."""
+    KJs = np.stack([KJ1, np.diag([0.5, 1.5, 2.0])])
+    qrs = np.stack([QR1, np.deg2rad([5.0, 0.0, 0.0])])
+    batch = pj.equilibrium_posture(wrist, KJs[:, None], qrs[:, None], TARGETS[None, 1:])
+    for s in range(2):
+        for t in range(3):
+            one = pj.equilibrium_posture(wrist, KJs[s], qrs[s], TARGETS[t + 1])
+            for field in ("q", "lam", "status", "kkt_residual", "steps"):
+                np.testing.assert_allclose(np.asarray(getattr(batch, field))[s, t], np.asarray(getattr(one, field)),
+                                           rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize(
@@ -156,8 +174,11 @@ def test_not_converged_is_flagged(wrist):
         (dict(target=np.zeros(3)), "target.*shape"),
         (dict(q_init=np.zeros(2)), "q_init.*shape"),
         (dict(q_rest=np.zeros((2, 3)), target=np.zeros((3, 2))), "broadcast"),
+        (dict(tol=0.0), "tol"),
+        (dict(max_iter=0), "max_iter"),
     ],
 )
+@pytest.mark.bad_input("pj.equilibrium_posture")
 def test_bad_input(wrist, kwargs, match):
     args = dict(KJ=KJ1, q_rest=QR1, target=TARGETS[0])
     args.update(kwargs)

@@ -50,3 +50,23 @@ def test_batch_axes_broadcast_like_numpy(rng):
     w = rng.uniform(0.2, 1.0, size=5)  # unbatched diagonal weights against batched J
     np.testing.assert_allclose(np.asarray(pj.nullspace_projector(J, w=w))[3, 0],
                                np.asarray(pj.nullspace_projector(J[3, 0], np.diag(w))), atol=1e-12)
+
+
+@pytest.mark.bad_input("pj.weighted_pinv", "pj.nullspace_projector", "pj.task_damping", "pj.lambda0")
+def test_bad_input(rng):
+    J = rng.normal(size=(2, 3))
+    W = _spd(rng, 3)
+    cases = [
+        (lambda: pj.weighted_pinv(J, np.eye(2)), "`W`.*shape"),
+        (lambda: pj.weighted_pinv(J, -W), "`W`.*positive definite"),
+        (lambda: pj.nullspace_projector(J, W + np.triu(np.ones((3, 3)), 1)), "`W`.*symmetric"),
+        (lambda: pj.nullspace_projector(J, w=np.array([1.0, 0.0, 1.0])), "`w`.*positive"),
+        (lambda: pj.task_damping(J.T, W[:2, :2]), "`J`.*wide"),
+        (lambda: pj.task_damping(np.ones(3), W), "`J`.*shape"),
+        (lambda: pj.task_damping(np.where(J > 0, np.nan, J), W), "`J`.*NaN"),
+        (lambda: pj.lambda0(J, W, np.ones(2)), "`tau_el`.*shape"),
+        (lambda: pj.lambda0(J, W, np.array([np.inf, 0.0, 0.0])), "`tau_el`.*NaN"),
+    ]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match):
+            call()

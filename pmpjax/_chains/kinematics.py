@@ -2,7 +2,8 @@
 
 Every chain exposes ``n`` (joints), ``m`` (task dimensions), ``fk(q)`` (..., n) -> (..., m) and
 ``jacobian(q)`` (..., n) -> (..., m, n), plus the component-leading kernel ``fk_jac_soa`` used
-inside integrators (see ``_linalg``). Chains are pytrees: lengths are leaves, sizes are static.
+inside integrators (see ``_base.linalg``). Chains are pytrees: lengths are leaves, sizes are
+static. How to write your own chain: see :class:`Chain`.
 """
 
 from __future__ import annotations
@@ -14,30 +15,91 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import det, from_soa, mm, to_soa
-from .._base.pytree import pytree_dataclass, static_field
+from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
 from .._base.trig import sincos
 from .._base.validate import as_array, check_positive, is_concrete
 
 
 class Chain:
-    """Base class: subclasses implement ``n``, ``m`` and ``fk_jac_soa``."""
+    """Base class of kinematic chains ``x = fk(q)``, ``q`` (n,) joint angles, ``x`` (m,) task point.
+
+    **Writing a chain (the extension contract).** Subclass ``Chain``, give ``n`` and ``m`` (class
+    attributes or fields) and implement, in JAX, for **one** posture:
+
+    - ``fk(self, q)``: ``q`` (n,) -> ``x`` (m,) (required);
+    - ``jacobian(self, q)``: ``q`` (n,) -> ``J = ∂fk/∂q`` (m, n) (optional; default ``jax.jacfwd``
+      of ``fk``).
+
+    The base class vectorises them: on every chain the public ``fk``/``jacobian`` accept leading
+    batch axes (..., n), and every pmpjax function (``simulate``, ``equilibrium_posture``, fits)
+    works with the chain. Optionally override ``reachable(x)`` and ``workspace_description()``
+    so that unreachable targets are rejected by name. A subclass is registered as a pytree when
+    it is defined: a ``pmpjax`` pytree dataclass keeps its array fields as leaves (differentiable,
+    vmappable: e.g. link lengths), any other class is a static object (hashed by identity).
+
+    **Optional fast path.** Instead of ``fk``, a chain may implement the component-leading kernel
+    ``fk_jac_soa(qc)``: ``qc`` (n, ...) -> ``(x (m, ...), J (m, n, ...))`` with the small axes
+    leading and the batch trailing (see ``pmpjax._base.linalg``), which XLA fuses into the RK4
+    loop; ``Wrist``, ``PlanarArm`` and ``Arm4`` do. Without it the base class builds that kernel
+    from ``fk`` (and ``jacobian``) by ``jax.vmap``, as :class:`FunctionChain` does for a plain
+    function.
+    """
 
     n: int
     m: int
 
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        # Per-item methods written by the subclass become the kernels; the public names get the
+        # batched (validated, vectorised) versions below.
+        for name in ("fk", "jacobian"):
+            f = cls.__dict__.get(name)
+            if f is not None and not getattr(f, "_batched", False):
+                setattr(cls, f"_{name}_one", f)
+                setattr(cls, name, getattr(Chain, name))
+        register_pytree_class(cls)
+
+    def _fk_jac_one(self):
+        fk_one = getattr(type(self), "_fk_one", None)
+        if fk_one is None:
+            raise NotImplementedError(
+                f"{type(self).__name__} must implement fk(q) for one posture q (n,) -> x (m,) "
+                "(or the fast path fk_jac_soa)"
+            )
+        jac_one = getattr(type(self), "_jacobian_one", None)
+        fk = lambda q: fk_one(self, q)  # noqa: E731
+        return fk, (jax.jacfwd(fk) if jac_one is None else (lambda q: jac_one(self, q)))
+
     def fk_jac_soa(self, qc):
-        """``qc`` (n, ...) -> ``x`` (m, ...), ``J`` (m, n, ...)."""
-        raise NotImplementedError
+        """``qc`` (n, ...) -> ``x`` (m, ...), ``J`` (m, n, ...); default: ``vmap`` of the per-item
+        ``fk`` and ``jacobian``."""
+        fk, jac = self._fk_jac_one()
+        batch = qc.shape[1:]
+        flat = qc.reshape(self.n, -1).T
+        x, J = jax.vmap(fk)(flat), jax.vmap(jac)(flat)
+        return x.T.reshape((self.m,) + batch), jnp.moveaxis(J, 0, -1).reshape((self.m, self.n) + batch)
+
+    def _per_item(self, which: int, q):
+        if getattr(type(self), "_fk_one", None) is None:
+            return from_soa(self.fk_jac_soa(to_soa(q))[which], which + 1)
+        f = self._fk_jac_one()[which]
+        flat = q.reshape(-1, self.n)
+        out = jax.vmap(f)(flat)
+        return out.reshape(q.shape[:-1] + out.shape[1:])
 
     def fk(self, q):
         """Task position ``x`` (..., m) of joint angles ``q`` (..., n) [rad]."""
         q = as_array("q", q, tail=(self.n,))
-        return from_soa(self.fk_jac_soa(to_soa(jnp.asarray(q)))[0])
+        return self._per_item(0, jnp.asarray(q))
+
+    fk._batched = True
 
     def jacobian(self, q):
         """Task Jacobian ``∂fk/∂q`` (..., m, n) at ``q`` (..., n) (Eq 2)."""
         q = as_array("q", q, tail=(self.n,))
-        return from_soa(self.fk_jac_soa(to_soa(jnp.asarray(q)))[1], 2)
+        return self._per_item(1, jnp.asarray(q))
+
+    jacobian._batched = True
 
     def reachable(self, x) -> np.ndarray:
         """Boolean (...,) mask of task points ``x`` (..., m) inside the reachable workspace."""
@@ -64,9 +126,16 @@ def manipulability(chain: Chain, q):
     It falls to zero where the Jacobian loses rank (wrist: pointing at the rim of the screen
     hemisphere, which includes gimbal lock FE = ±90°), so it is the detector for singular postures.
     """
-    J = chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1]
-    JJt = mm(J, jnp.swapaxes(J, 0, 1))
-    return jnp.sqrt(jnp.maximum(det(JJt), 0.0))
+    if not isinstance(chain, Chain):
+        raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
+    q = as_array("q", q, tail=(chain.n,))
+    return manipulability_soa(chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1])
+
+
+def manipulability_soa(J):
+    """``sqrt(det(J Jᵀ))`` (...) of a component-leading Jacobian ``J`` (m, n, ...) (the kernel of
+    :func:`manipulability`, for integrators)."""
+    return jnp.sqrt(jnp.maximum(det(mm(J, jnp.swapaxes(J, 0, 1))), 0.0))
 
 
 @pytree_dataclass
@@ -81,7 +150,7 @@ class Wrist(Chain):
     ``|x| ≤ d·sin(max_angle)`` (default 80°) to stay clear of that rim.
     """
 
-    d: float = 1.0
+    d: jax.Array = 1.0  # array leaf [m] (differentiable, vmappable)
     max_angle: float = static_field(default=float(np.deg2rad(80.0)))
     n: int = static_field(default=3)
     m: int = static_field(default=2)
@@ -108,10 +177,11 @@ class Wrist(Chain):
 
     def reachable(self, x):
         r = np.linalg.norm(np.asarray(x, dtype=float), axis=-1)
-        return r <= float(self.d) * np.sin(self.max_angle)
+        return r <= float(np.asarray(self.d)) * np.sin(self.max_angle)
 
     def workspace_description(self):
-        return f"|x| <= d*sin({np.rad2deg(self.max_angle):.0f}°) = {float(self.d) * np.sin(self.max_angle):.4g} m"
+        d = float(np.asarray(self.d))
+        return f"|x| <= d*sin({np.rad2deg(self.max_angle):.0f}°) = {d * np.sin(self.max_angle):.4g} m"
 
     def rotation(self, q):
         """Hand orientation ``R(q)`` (..., 3, 3) of Eq 6."""
@@ -200,12 +270,8 @@ class FunctionChain(Chain):
         if out.shape != (self.m,):
             raise ValueError(f"`fn` must map (n,)=({self.n},) to (m,)=({self.m},), got {out.shape}")
 
-    def fk_jac_soa(self, qc):
-        flat = qc.reshape(self.n, -1).T
-        x = jax.vmap(self.fn)(flat)
-        J = jax.vmap(jax.jacfwd(self.fn))(flat)
-        batch = qc.shape[1:]
-        return x.T.reshape((self.m,) + batch), jnp.moveaxis(J, 0, -1).reshape((self.m, self.n) + batch)
+    def fk(self, q):
+        return self.fn(q)
 
     def reachable(self, x):
         if self.reach is None:

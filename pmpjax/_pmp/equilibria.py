@@ -8,15 +8,17 @@ This is the final posture of the λ0-PMP (Donders' law). With Lagrangian
 and ``λ`` is the task force λ0 of Eq 4 at the equilibrium. It is solved by Newton's method on
 (q, λ) with the exact Hessian of the Lagrangian ``H = KJ − Σ_i λ_i ∇²fk_i`` (the second term
 by forward-mode differentiation of ``Jᵀλ``), and differentiated by the implicit function
-theorem (``jax.custom_jvp``: one extra KKT solve per tangent; forward and reverse mode).
+theorem (one extra KKT solve per tangent; forward and reverse mode): the loop and the rule are
+the shared :func:`pmpjax._base.newton.newton_solve`; this module supplies the KKT residual and
+its solve.
 
 Initial guess (default ``q_init = q_rest``, ``λ = 0``): the first Newton step is then the
 ``KJ``-weighted projection of ``q_rest`` onto the linearised constraint, which is the exact answer
 for a linear chain; curvature corrections converge quadratically. Steps are capped at 0.5 rad
 (infinity norm). The KKT matrix ``[[H, −Jᵀ], [J, 0]]`` is indefinite; it is solved by
-augmented-Lagrangian elimination with unrolled SPD solves (``_kkt_solve``); ``converged``
-additionally requires a strict local minimum (reduced Hessian positive definite), so a saddle
-or maximum of the energy along the task manifold is flagged. Pass ``q_init`` (e.g. an observed
+augmented-Lagrangian elimination with unrolled SPD solves (``_kkt_solve``); ``status`` is
+``SUCCESSFUL`` only for a strict local minimum (reduced Hessian positive definite), so a saddle
+or maximum of the energy along the task manifold is flagged (``NOT_MINIMUM``). Pass ``q_init`` (e.g. an observed
 posture, or the end of a λ0-PMP run) to start elsewhere: the solution is then the local minimum
 nearest along Newton's path.
 """
@@ -28,10 +30,12 @@ from functools import partial
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
+from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
 from .._base.linalg import spd_solve
+from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
+from .._base.status import Status
 from .._base.validate import as_array, check_positive, check_positive_int, check_spd
 from .._chains.kinematics import Chain
 
@@ -41,14 +45,21 @@ _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
 @pytree_dataclass
 class Equilibrium:
     """``q`` (..., n) equilibrium posture [rad]; ``lam`` (..., m) multiplier (= λ0, task force);
-    ``converged`` (...,) bool: KKT residual below tolerance, finite, and a strict local minimum
-    (reduced Hessian positive definite); ``kkt_residual`` (...,) ``max(|g|_∞ / s, |c|_∞)`` with
-    ``s = max |KJ|``."""
+    ``status`` (...,) int :class:`pmpjax.Status`: ``SUCCESSFUL`` (KKT residual below tolerance and
+    a strict local minimum), ``NONFINITE``, ``MAX_STEPS``, ``STALLED`` (steps stopped above the
+    residual tolerance) or ``NOT_MINIMUM`` (a saddle or maximum along the task manifold);
+    ``kkt_residual`` (...,) ``max(|g|_∞ / s, |c|_∞)`` with ``s = max |KJ|``; ``steps`` (...,)
+    Newton steps taken. ``converged`` = ``status == SUCCESSFUL``."""
 
     q: jax.Array
     lam: jax.Array
-    converged: jax.Array
+    status: jax.Array
     kkt_residual: jax.Array
+    steps: jax.Array
+
+    @property
+    def converged(self) -> jax.Array:
+        return self.status == Status.SUCCESSFUL
 
 
 # --- one item: K (n, n), qr (n,), x (m,), q (n,), lam (m,); batches are vmapped ---------------
@@ -96,45 +107,22 @@ def _is_minimum(H, J):
     return jnp.all(jnp.isfinite(jnp.linalg.cholesky(H + rho * (J.T @ J))))
 
 
-def _newton(chain, K, qr, x, q0, tol, max_iter):
-    def step(q, lam):
-        _, c, J = _residual(chain, K, qr, x, q, lam)
-        H = _lagrangian_hessian(chain, K, q, lam)
-        # Newton on (q, λ): H dq − Jᵀ λ_new = −KJ (q − q_rest),  J dq = −c.
-        dq, lam_new = (a[:, 0] for a in _kkt_solve(H, J, -(K @ (q - qr))[:, None], -c[:, None]))
-        big = jnp.max(jnp.abs(dq))
-        alpha = jnp.minimum(1.0, _STEP_CAP / jnp.where(big > 0, big, 1.0))
-        return q + alpha * dq, lam + alpha * (lam_new - lam), big
-
-    def cond(s):
-        q, _, big, it = s
-        return (it < max_iter) & (big > tol * (1.0 + jnp.max(jnp.abs(q))))
-
-    def body(s):
-        q, lam, _, it = s
-        q, lam, big = step(q, lam)
-        return q, lam, jnp.where(jnp.isnan(big), 0.0, big), it + 1
-
-    init = (q0, jnp.zeros(x.shape, q0.dtype), jnp.asarray(jnp.inf, q0.dtype), jnp.asarray(0))
-    q, lam, _, _ = jax.lax.while_loop(cond, body, init)
-    return q, lam
+# The KKT specialisation of the shared Newton solver: y = (q, λ), params = (chain, KJ, q_rest, x).
+def _kkt_residual(y, params, consts):
+    g, c, _ = _residual(*params, *y)
+    return g, c
 
 
-@partial(jax.custom_jvp, nondiff_argnums=(5, 6))
-def _solve(chain, K, qr, x, q0, tol, max_iter):
-    return _newton(chain, K, qr, x, q0, tol, max_iter)
+def _kkt_newton_solve(y, params, consts, rhs):
+    chain, K, _, _ = params
+    q, lam = y
+    J = chain.fk_jac_soa(q)[1]
+    dq, dlam = _kkt_solve(_lagrangian_hessian(chain, K, q, lam), J, rhs[0][:, None], rhs[1][:, None])
+    return dq[:, 0], dlam[:, 0]
 
 
-@_solve.defjvp
-def _solve_jvp(tol, max_iter, primals, tangents):
-    chain, K, qr, x, q0 = primals
-    q, lam = _solve(chain, K, qr, x, q0, tol, max_iter)
-    # Implicit function theorem: [[H, −Jᵀ], [J, 0]] (q̇, λ̇) = −(ġ, ċ) with θ̇ = (chain, KJ, q_rest, x)˙.
-    _, (dg, dc, _) = jax.jvp(lambda ch, k, r, t: _residual(ch, k, r, t, q, lam), primals[:4], tangents[:4])
-    _, _, J = _residual(chain, K, qr, x, q, lam)
-    H = _lagrangian_hessian(chain, K, q, lam)
-    dq, dlam = _kkt_solve(H, J, -dg[:, None], -dc[:, None])
-    return (q, lam), (dq[:, 0], dlam[:, 0])
+def _joint_part(y):
+    return y[0]
 
 
 def equilibrium_one(
@@ -142,18 +130,33 @@ def equilibrium_one(
 ):
     """One item (vmap it): ``K`` (n, n), ``qr`` (n,), ``x`` (m,), ``q0`` (n,).
 
-    Returns ``(q (n,), lam (m,), converged (), kkt_residual ())``; ``q`` and ``lam`` are
-    differentiable (implicit), the flags are not. ``check_minimum=False`` skips the second-order
-    test in ``converged`` (KKT residual only; cheaper inside fits).
+    Returns ``(q (n,), lam (m,), status (), kkt_residual (), steps ())``; ``q`` and ``lam`` are
+    differentiable (implicit), the rest are not. ``check_minimum=False`` skips the second-order
+    test (KKT residual only; cheaper inside fits).
     """
-    q, lam = _solve(chain, K, qr, x, q0, float(tol), int(max_iter))
+    (q, lam), steps = newton_solve(
+        _kkt_residual,
+        _kkt_newton_solve,
+        (q0, jnp.zeros(x.shape, q0.dtype)),
+        (chain, K, qr, x),
+        max_steps=int(max_iter),
+        tol=float(tol),
+        step_cap=_STEP_CAP,
+        measure=_joint_part,
+    )
     Ks, qrs, xs, qs, ls = jax.lax.stop_gradient((K, qr, x, q, lam))
     g, c, J = _residual(chain, Ks, qrs, xs, qs, ls)
     res = jnp.maximum(jnp.max(jnp.abs(g)) / jnp.max(jnp.abs(Ks)), jnp.max(jnp.abs(c)))
-    ok = jnp.isfinite(res) & (res <= 1e3 * tol * (1.0 + jnp.max(jnp.abs(qs))))
+    finite = jnp.isfinite(res) & jnp.all(jnp.isfinite(qs))
+    small = res <= 1e3 * tol * (1.0 + jnp.max(jnp.abs(qs)))
+    status = jnp.where(
+        ~finite, Status.NONFINITE, jnp.where(small, Status.SUCCESSFUL,
+                                             jnp.where(steps >= max_iter, Status.MAX_STEPS, Status.STALLED))
+    )
     if check_minimum:
-        ok = ok & _is_minimum(_lagrangian_hessian(chain, Ks, qs, ls), J)
-    return q, lam, ok, res
+        is_min = _is_minimum(_lagrangian_hessian(chain, Ks, qs, ls), J)
+        status = jnp.where((status == Status.SUCCESSFUL) & ~is_min, Status.NOT_MINIMUM, status)
+    return q, lam, status, res, steps
 
 
 @partial(jax.jit, static_argnames=("tol", "max_iter"))
@@ -172,8 +175,7 @@ def equilibrium_posture(
     *,
     tol: float = 1e-10,
     max_iter: int = 50,
-    return_info: bool = False,
-):
+) -> Equilibrium:
     """Equilibrium posture of the λ0-PMP: ``argmin ½ (q − q_rest)ᵀ KJ (q − q_rest)`` s.t. ``fk(q) = target``.
 
     **Arguments:**
@@ -183,10 +185,10 @@ def equilibrium_posture(
     - ``target``: (..., m) task position (wrist: screen point [m]); must be reachable.
     - ``q_init``: optional (..., n) initial guess (default ``q_rest``; see module docstring).
     - ``tol``: Newton stops when every step is below ``tol (1 + |q|_∞)``; ``max_iter`` bounds it.
-    - ``return_info``: return an :class:`Equilibrium` (``q``, ``lam``, ``converged``,
-      ``kkt_residual``) instead of ``q`` alone.
 
-    Leading axes of all arrays broadcast (targets × subjects, ...). Differentiable with respect to
+    Leading axes of all arrays broadcast (targets × subjects, ...). Returns an
+    :class:`Equilibrium` (``.q`` the posture, ``.lam``, ``.status``, ``.converged``,
+    ``.kkt_residual``, ``.steps``). ``.q`` and ``.lam`` are differentiable with respect to
     ``KJ``, ``q_rest``, ``target`` and the chain's parameters (implicit function theorem; forward
     and reverse mode); works under ``jit``/``vmap`` (validation then only checks shapes).
 
@@ -205,43 +207,16 @@ def equilibrium_posture(
         q_init = as_array("q_init", q_init, tail=(n,))
     check_positive("tol", tol)
     check_positive_int("max_iter", max_iter)
-    shapes = [np.shape(KJ)[:-2], np.shape(q_rest)[:-1], np.shape(target)[:-1]]
-    if q_init is not None:
-        shapes.append(np.shape(q_init)[:-1])
-    try:
-        batch = tuple(np.broadcast_shapes(*shapes))
-    except ValueError as e:
-        raise ValueError(
-            f"leading (batch) axes of `KJ` {shapes[0]}, `q_rest` {shapes[1]}, `target` {shapes[2]}"
-            + (f", `q_init` {shapes[3]}" if q_init is not None else "")
-            + " do not broadcast"
-        ) from e
-    B = math.prod(batch)
+    batch = broadcast_batch(KJ=(KJ, 2), q_rest=(q_rest, 1), target=(target, 1), q_init=(q_init, 1))
     dtype = jnp.result_type(float)
-
-    def flat(a, core):
-        a = jnp.asarray(a, dtype)
-        return jnp.broadcast_to(a, batch + a.shape[a.ndim - core :]).reshape((B,) + a.shape[a.ndim - core :])
-
     q0 = q_rest if q_init is None else q_init
+    B = math.prod(batch)
     # Pad the flat batch to a power of two (>= 8) so that calls of similar size share one compile.
-    Bp = max(8, 1 << (B - 1).bit_length())
-
-    def padded(a):
-        return jnp.concatenate([a, jnp.broadcast_to(a[:1], (Bp - B,) + a.shape[1:])]) if Bp > B else a
-
-    q, lam, ok, res = (
-        a[:B]
-        for a in _flat_solve(
-            chain,
-            *(padded(flat(a, c)) for a, c in ((KJ, 2), (q_rest, 1), (target, 1), (q0, 1))),
-            tol=float(tol),
-            max_iter=int(max_iter),
-        )
-    )
-    q = q.reshape(batch + (n,))
-    if not return_info:
-        return q
-    return Equilibrium(
-        q=q, lam=lam.reshape(batch + (m,)), converged=ok.reshape(batch), kkt_residual=res.reshape(batch)
-    )
+    Bp = bucket(B, minimum=8)
+    flat = [
+        pad_rows(flatten_batch(a, batch, core, dtype=dtype), Bp)
+        for a, core in ((KJ, 2), (q_rest, 1), (target, 1), (q0, 1))
+    ]
+    out = _flat_solve(chain, *flat, tol=float(tol), max_iter=int(max_iter))
+    q, lam, status, res, steps = (unflatten_batch(a[:B], batch) for a in out)
+    return Equilibrium(q=q, lam=lam, status=status, kkt_residual=res, steps=steps)

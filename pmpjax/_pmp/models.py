@@ -11,24 +11,28 @@ Velocity fields, with ``A = W⁻¹``, ``τ_el = KJ (q − q_rest)`` and task for
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import broadcast_batch
 from .._base.linalg import mv, spd_inv, to_soa
-from .._base.pytree import pytree_dataclass, static_field
+from .._base.pytree import pytree_dataclass
 from .._base.validate import as_array, check_positive, check_spd
 from .._chains.kinematics import Chain
 from .redundancy import admittance_terms_soa, lambda0_soa
 
 
 class _PMP:
+    """Shared field of the three models; ``elastic`` (τ_el present) and ``blocked`` (λ0 added)
+    are class constants, not fields. PMP1 has no ``KJ``/``q_rest`` (class attributes ``None``)."""
+
     chain: Chain
-    KJ: jax.Array | None
-    q_rest: jax.Array | None
     W: jax.Array
-    elastic: bool = False
-    blocked: bool = False
+    elastic: ClassVar[bool] = False
+    blocked: ClassVar[bool] = False
 
     def _validate(self):
         if not isinstance(self.chain, Chain):
@@ -44,10 +48,9 @@ class _PMP:
             object.__setattr__(self, "q_rest", jnp.asarray(q_rest, float))
 
     def batch_shape(self) -> tuple[int, ...]:
-        shapes = [jnp.shape(self.W)[:-2]]
-        if self.elastic:
-            shapes += [jnp.shape(self.KJ)[:-2], jnp.shape(self.q_rest)[:-1]]
-        return tuple(np.broadcast_shapes(*shapes))
+        if not self.elastic:
+            return broadcast_batch(W=(self.W, 2))
+        return broadcast_batch(W=(self.W, 2), KJ=(self.KJ, 2), q_rest=(self.q_rest, 1))
 
     def prepare_soa(self, batch):
         """Per-trajectory constants, component-leading with trailing ``batch``: ``A``, ``G``, ``q_rest``."""
@@ -70,10 +73,12 @@ class _PMP:
         return mv(P, F) - g
 
     def velocity(self, q, F):
-        """Joint velocity ``q̇`` (..., n) at ``q`` (..., n) under task force ``F`` (..., m)."""
-        q = jnp.asarray(q)
-        F = jnp.asarray(F)
-        batch = tuple(np.broadcast_shapes(q.shape[:-1], F.shape[:-1], self.batch_shape()))
+        """Joint velocity ``q̇`` (..., n) [rad/s] at ``q`` (..., n) [rad] under task force ``F``
+        (..., m) [N] (the model's field, Figure 1B); leading axes broadcast with the model's.
+        Differentiable in ``q``, ``F`` and the model's leaves."""
+        q = jnp.asarray(as_array("q", q, tail=(self.chain.n,)))
+        F = jnp.asarray(as_array("F", F, tail=(self.chain.m,)))
+        batch = broadcast_batch(q=(q, 1), F=(F, 1), model=(np.broadcast_to(0.0, self.batch_shape()), 0))
         qc = to_soa(jnp.broadcast_to(q, batch + q.shape[-1:]))
         consts = self.prepare_soa(batch)
         _, J = self.chain.fk_jac_soa(qc)
@@ -84,14 +89,15 @@ class _PMP:
 
 @pytree_dataclass
 class PMP1(_PMP):
-    """Purely viscous PMP: ``q̇ = W⁻¹ Jᵀ F``. Solves redundancy, path-dependent postures."""
+    """Purely viscous PMP: ``q̇ = W⁻¹ Jᵀ F``. Solves redundancy, path-dependent postures.
+
+    ``chain``: a Chain; ``W`` (..., n, n) SPD joint damping [Nm s/rad] (array leaf).
+    """
 
     chain: Chain
     W: jax.Array
-    KJ: None = static_field(default=None)
-    q_rest: None = static_field(default=None)
-    elastic: bool = static_field(default=False)
-    blocked: bool = static_field(default=False)
+    KJ: ClassVar[None] = None
+    q_rest: ClassVar[None] = None
 
     def __post_init__(self):
         self._validate()
@@ -99,14 +105,17 @@ class PMP1(_PMP):
 
 @pytree_dataclass
 class PMP2(_PMP):
-    """Visco-elastic PMP: ``q̇ = W⁻¹ (Jᵀ F − KJ (q − q_rest))``. Unique postures, misses targets."""
+    """Visco-elastic PMP: ``q̇ = W⁻¹ (Jᵀ F − KJ (q − q_rest))``. Unique postures, misses targets.
+
+    ``KJ`` (..., n, n) SPD [Nm/rad], ``q_rest`` (..., n) [rad], ``W`` (..., n, n) SPD [Nm s/rad]:
+    array leaves (vmappable, differentiable).
+    """
 
     chain: Chain
     KJ: jax.Array
     q_rest: jax.Array
     W: jax.Array
-    elastic: bool = static_field(default=True)
-    blocked: bool = static_field(default=False)
+    elastic: ClassVar[bool] = True
 
     def __post_init__(self):
         self._validate()
@@ -117,27 +126,38 @@ class Lambda0PMP(_PMP):
     """λ0-PMP (Eq 4–5): reaches the target and ends in the energy-minimising posture (Donders).
 
     ``chain``: a Chain; ``KJ`` (..., n, n) SPD joint stiffness [Nm/rad]; ``q_rest`` (..., n) rest
-    posture [rad]; ``W`` (..., n, n) SPD joint damping [Nm s/rad]. Leading axes batch.
+    posture [rad]; ``W`` (..., n, n) SPD joint damping [Nm s/rad]: array leaves. Leading axes batch.
     """
 
     chain: Chain
     KJ: jax.Array
     q_rest: jax.Array
     W: jax.Array
-    elastic: bool = static_field(default=True)
-    blocked: bool = static_field(default=True)
+    elastic: ClassVar[bool] = True
+    blocked: ClassVar[bool] = True
 
     def __post_init__(self):
         self._validate()
 
 
 def damping_from_stiffness(KJ, tau0):
-    """``W = τ0 KJ`` (Eq 7): damping proportional to stiffness, intrinsic time constant τ0 [s]."""
+    """``W = τ0 KJ`` (Eq 7) (..., n, n) [Nm s/rad]: damping proportional to stiffness ``KJ``
+    (..., n, n) [Nm/rad], intrinsic time constant ``tau0`` (...) [s] (positive)."""
+    KJ = as_array("KJ", KJ, tail=(None, None))
+    if KJ.shape[-1] != KJ.shape[-2]:
+        raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
+    tau0 = as_array("tau0", tau0)
     check_positive("tau0", tau0)
     return jnp.asarray(tau0)[..., None, None] * jnp.asarray(KJ)
 
 
 def normalize_trace(KJ, trace: float = 4.0):
     """Scale ``KJ`` (..., n, n) to ``trace(KJ) = trace`` (paper: 4 Nm/rad; only ratios matter)."""
+    KJ = as_array("KJ", KJ, tail=(None, None))
+    if KJ.shape[-1] != KJ.shape[-2]:
+        raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
+    check_positive("trace", trace)
     KJ = jnp.asarray(KJ)
-    return KJ * (trace / jnp.trace(KJ, axis1=-2, axis2=-1))[..., None, None]
+    tr = jnp.trace(KJ, axis1=-2, axis2=-1)
+    check_positive("trace(KJ)", tr)
+    return KJ * (trace / tr)[..., None, None]

@@ -1,18 +1,19 @@
 """Task planners: the extrinsic force ``F = K(t) (x_d − x)`` that pulls the hand to the target.
 
 Each planner is a pytree with ``gain(t)`` (scalar stiffness [N/m], time reset to 0 at each new
-target) and ``force_soa``. ``start(model, M0)`` resolves parameters that depend on the start
+target) and ``force_soa``. ``start(M0)`` resolves parameters that depend on the start
 posture (Eq 10) and is called once per movement.
 """
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import spd_solve
 from .._base.pytree import pytree_dataclass, replace, static_field
-from .._base.validate import check_positive
+from .._base.validate import as_array, check_positive
 
 
 def _scale(gain, e):
@@ -45,17 +46,16 @@ class Planner:
         return []
 
     def to_soa(self, batch):
-        """Broadcast leaves to ``batch`` and flatten like the state (see ``_simulate``)."""
-        import jax
-
+        """Broadcast leaves to ``batch`` and flatten like the state (see ``simulate``)."""
         return jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, batch).reshape(-1), self)
 
 
 @pytree_dataclass
 class ConstantPlanner(Planner):
-    """Constant isotropic stiffness ``K = k I`` [N/m]: exponential (first-order) approach."""
+    """Constant isotropic stiffness ``K = k I`` [N/m]: exponential (first-order) approach.
+    ``k`` is an array leaf (scalar or a batch)."""
 
-    k: float
+    k: jax.Array
 
     def __post_init__(self):
         check_positive("k", self.k)
@@ -71,8 +71,14 @@ class ConstantPlanner(Planner):
 
 
 def eq10_gain(M0, tau0):
-    """``k = b_max / τ0`` (Eq 10) from ``M0 = B(q0)⁻¹`` (m, m, ...): ``b_max = 1/λ_min(M0)``."""
-    Mt = jnp.moveaxis(M0, (0, 1), (-2, -1))
+    """``k = b_max / τ0`` (Eq 10) [N/m] from ``M0 = B(q0)⁻¹ = J W⁻¹ Jᵀ`` (m, m, ...) (component-leading:
+    the batch trails) and ``tau0`` (...) [s]: ``b_max = 1/λ_min(M0)``."""
+    M0 = as_array("M0", M0)
+    if M0.ndim < 2 or M0.shape[0] != M0.shape[1]:
+        raise ValueError(f"`M0` must be a component-leading square matrix (m, m, ...), got shape {M0.shape}")
+    tau0 = as_array("tau0", tau0)
+    check_positive("tau0", tau0)
+    Mt = jnp.moveaxis(jnp.asarray(M0), (0, 1), (-2, -1))
     lam_min = jnp.linalg.eigvalsh(Mt)[..., 0]
     return 1.0 / (lam_min * tau0)
 
@@ -85,9 +91,9 @@ class ArimotoPlanner(Planner):
     is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``.
     """
 
-    k: float | None
-    tau: float
-    tau0: float | None = None
+    k: jax.Array | None
+    tau: jax.Array
+    tau0: jax.Array | None = None
 
     def __post_init__(self):
         check_positive("tau", self.tau)
@@ -123,8 +129,8 @@ class MinimumJerkPlanner(Planner):
     target at ``t = T``: ``γ = ξ̇ / (1 − ξ)``, capped at ``gain_cap`` [1/s] near and after ``T``.
     """
 
-    duration: float
-    gain_cap: float = 200.0
+    duration: jax.Array
+    gain_cap: jax.Array = 200.0
     task_velocity: bool = static_field(default=True)
 
     def __post_init__(self):

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
+from .._base.validate import as_array, check_positive, check_spd
 
 
 def admittance_terms_soa(J, A):
@@ -69,18 +70,16 @@ def _admittance(J, W, w):
     if (W is None) == (w is None):
         raise ValueError("give exactly one of `W` (..., n, n) or diagonal weights `w` (..., n)")
     if w is not None:
-        w = jnp.asarray(w)
-        if w.shape[-1:] != (n,):
-            raise ValueError(f"`w` must have trailing shape ({n},), got {w.shape}")
+        w = jnp.asarray(as_array("w", w, tail=(n,)))
+        check_positive("w", w)
         return to_soa(jnp.eye(n).reshape((1,) * (w.ndim - 1) + (n, n)) / w[..., None, :], 2)
-    W = jnp.asarray(W)
-    if W.shape[-2:] != (n, n):
-        raise ValueError(f"`W` must have trailing shape ({n}, {n}), got {W.shape}")
+    W = jnp.asarray(as_array("W", W, tail=(n, n)))
+    check_spd("W", W)
     return spd_inv(to_soa(W, 2))
 
 
 def _check_J(J):
-    J = jnp.asarray(J)
+    J = jnp.asarray(as_array("J", J))
     if J.ndim < 2:
         raise ValueError(f"`J` must have shape (..., m, n), got {J.shape}")
     if J.shape[-2] > J.shape[-1]:
@@ -127,6 +126,7 @@ def lambda0(J, W, tau_el):
     """Task force ``λ0 = B J W⁻¹ τ_el`` (..., m) that blocks ``τ_el`` (..., n) in task space (Eq 4)."""
     J = _check_J(J)
     Js, A = _bcast(to_soa(J, 2), _admittance(J, W, None))
-    tau = to_soa(jnp.broadcast_to(jnp.asarray(tau_el), J.shape[:-2] + J.shape[-1:]))
+    tau_el = jnp.asarray(as_array("tau_el", tau_el, tail=(J.shape[-1],)))
+    tau = to_soa(jnp.broadcast_to(tau_el, J.shape[:-2] + J.shape[-1:]))
     P, M = admittance_terms_soa(Js, A)
     return from_soa(lambda0_soa(Js, M, mv(A, tau)))

@@ -116,7 +116,19 @@ def _solve_equilibrium_jvp(n_iter, primals, tangents):
 
 
 def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
-    q = _solve_equilibrium(int(n_iter), mx, q_set, K)
+    # The shared Newton solver (pmpjax._base.newton): residual K (θ − θ_set) + ∇V(θ), Newton
+    # matrix K + ∇²V from one MJX kinematics pass, 0.5 rad cap, n_iter steps; implicit gradients
+    # in (θ_set, K), the model's tangents ignored (consts).
+    from .._base.newton import newton_solve
+
+    def residual(q, params, mx):
+        qs, Kp = params
+        return Kp * (q - qs) + gravity_terms(mx, q)[0]
+
+    def solve(q, params, mx, rhs):
+        return jnp.linalg.solve(jnp.diag(params[1]) + gravity_terms(mx, q)[1], rhs)
+
+    q, _ = newton_solve(residual, solve, q_set, (q_set, K), mx, max_steps=int(n_iter), step_cap=0.5)
     if not diagnostics:  # lean version for fits: no residual/stability kinematics passes
         return q, (None if site_id is None else site_position(mx, site_id, q)), None, None
     g, H, d = gravity_terms(mx, jax.lax.stop_gradient(q))

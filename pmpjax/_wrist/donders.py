@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array
+from .._base.validate import as_array, check_positive, check_positive_int
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .orientation import rotvec_from_joint_angles
@@ -46,9 +46,11 @@ def _design(r_y, r_z):
 
 
 def evaluate_surface(coef, r_y, r_z):
-    """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²``; ``coef`` (..., 6)."""
-    coef = jnp.asarray(coef)
-    r_y, r_z = jnp.asarray(r_y, coef.dtype), jnp.asarray(r_z, coef.dtype)
+    """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²`` [rad]; ``coef`` (..., 6), ``r_y``,
+    ``r_z`` [rad] broadcast against ``coef[..., 0]``."""
+    coef = jnp.asarray(as_array("coef", coef, tail=(6,)))
+    r_y = jnp.asarray(as_array("r_y", r_y), coef.dtype)
+    r_z = jnp.asarray(as_array("r_z", r_z), coef.dtype)
     shape = jnp.broadcast_shapes(coef.shape[:-1], r_y.shape, r_z.shape)
     A = _design(jnp.broadcast_to(r_y, shape), jnp.broadcast_to(r_z, shape))
     return jnp.sum(A * jnp.broadcast_to(coef, shape + (6,)), axis=-1)
@@ -59,7 +61,9 @@ def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 
 
     Returns ``(r_y (n, n), r_z (n, n), r_x (..., n, n))``."""
     coef = surface_or_coef.coef if isinstance(surface_or_coef, DondersSurface) else surface_or_coef
-    coef = jnp.asarray(coef)
+    coef = jnp.asarray(as_array("surface_or_coef", coef, tail=(6,)))
+    check_positive("extent", extent)
+    n = check_positive_int("n", n)
     g = jnp.linspace(-extent, extent, n)
     ry, rz = jnp.meshgrid(g, g, indexing="ij")
     return ry, rz, evaluate_surface(coef[..., None, None, :], ry, rz)
@@ -106,6 +110,10 @@ def fit_donders_surface(r, mask=None) -> DondersSurface:
 def screen_grid(n: int = 9, *, half_angle_deg: float = SCREEN_HALF_ANGLE_DEG, d: float = 1.0):
     """``n × n`` pointing targets (n², 2) [m] covering the ±``half_angle_deg`` screen area
     (``|x_i| ≤ d sin(half_angle)``, Eq 6 at distance ``d``)."""
+    n = check_positive_int("n", n)
+    check_positive("d", d)
+    if not (np.isfinite(half_angle_deg) and 0 < half_angle_deg < 90):
+        raise ValueError(f"`half_angle_deg` must be in (0, 90), got {half_angle_deg}")
     h = d * np.sin(np.deg2rad(half_angle_deg))
     g = np.linspace(-h, h, n)
     return np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
@@ -119,10 +127,15 @@ def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = No
     Returns ``(surface, r (..., P, 3), q (..., P, 3))``. Differentiable in ``KJ``, ``q_rest``.
     """
     chain = Wrist() if chain is None else chain
-    pointing = screen_grid() if pointing is None else pointing
-    KJ = jnp.asarray(KJ)
-    q_rest = jnp.asarray(q_rest)
-    q = equilibrium_posture(chain, KJ[..., None, :, :], q_rest[..., None, :], pointing)
+    if not isinstance(chain, Wrist):
+        raise TypeError(f"`chain` must be a pmpjax.Wrist (Donders surfaces are of wrist postures), got {chain!r}")
+    pointing = screen_grid() if pointing is None else as_array("pointing", pointing, tail=(None, 2))
+    if np.ndim(pointing) != 2:
+        raise ValueError(f"`pointing` must have shape (P, 2), got {np.shape(pointing)}")
+    chain.check_target("pointing", pointing)
+    KJ = jnp.asarray(as_array("KJ", KJ, tail=(3, 3)))
+    q_rest = jnp.asarray(as_array("q_rest", q_rest, tail=(3,)))
+    q = equilibrium_posture(chain, KJ[..., None, :, :], q_rest[..., None, :], pointing).q
     r = rotvec_from_joint_angles(q)
     return fit_donders_surface(r), r, q
 
@@ -135,6 +148,8 @@ def plot_donders(r=None, surfaces=(), *, labels=None, ax=None, extent=np.deg2rad
     """
     import matplotlib.pyplot as plt
 
+    if r is not None:
+        r = as_array("r", r, tail=(3,))
     if ax is None:
         ax = plt.figure(figsize=(6, 5)).add_subplot(projection="3d")
     deg = np.rad2deg

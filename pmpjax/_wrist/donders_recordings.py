@@ -35,7 +35,7 @@ import os
 
 import numpy as np
 
-from .._base.validate import check_finite_masked, check_positive_int
+from .._base.validate import as_array, check_finite_masked, check_positive, check_positive_int, check_spd
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .donders import SCREEN_HALF_ANGLE_DEG
@@ -128,8 +128,14 @@ def synthetic_recordings(
     with an IMU, the recorded pointing is the point the *noisy* orientation points at (Eq 6), so
     pointing and orientation are consistent. Seeded (``numpy.random.default_rng(seed)``).
     """
-    KJ = np.asarray(KJ, dtype=float)
-    q_rest = np.asarray(q_rest, dtype=float)
+    KJ = np.asarray(as_array("KJ", KJ, tail=(3, 3)), dtype=float)
+    q_rest = np.asarray(as_array("q_rest", q_rest, tail=(3,)), dtype=float)
+    if KJ.ndim != q_rest.ndim + 1 or KJ.ndim > 3 or KJ.shape[:-2] != q_rest.shape[:-1]:
+        raise ValueError(f"`KJ` (S, 3, 3) and `q_rest` (S, 3) must agree, got {KJ.shape} and {q_rest.shape}")
+    check_spd("KJ", KJ)
+    check_positive("d", d)
+    if not (np.isfinite(half_angle_deg) and 0 < half_angle_deg < 90):
+        raise ValueError(f"`half_angle_deg` must be in (0, 90), got {half_angle_deg}")
     if KJ.ndim == 2:
         KJ, q_rest = KJ[None], q_rest[None]
     S = KJ.shape[0]
@@ -144,7 +150,9 @@ def synthetic_recordings(
     chain = Wrist(d=float(d))
     h = d * np.sin(np.deg2rad(half_angle_deg))
     targets = rng.uniform(-h, h, size=(S, n_samples, 2))
-    q = equilibrium_posture(chain, KJ[:, None], q_rest[:, None], targets)
+    q = equilibrium_posture(chain, KJ[:, None], q_rest[:, None], targets).q
+    if not np.all(np.isfinite(np.asarray(q))):
+        raise ValueError("`KJ`, `q_rest`: some equilibrium postures could not be computed (non-finite)")
     eps = rng.normal(size=(S, n_samples, 3)) * (np.deg2rad(noise)[:, None, None] / np.sqrt(3.0))
     R = wrist_rotation(q) @ matrix_from_rotvec(eps)
     quat = np.asarray(quat_from_matrix(R))
@@ -155,7 +163,7 @@ def synthetic_recordings(
 def recording_from_arrays(subjects, pointing, *, quat=None, joint_angles=None, mask=None, d=1.0):
     """Build a validated :class:`DondersRecording` from arrays (S, N, ·); give ``quat`` or
     ``joint_angles``."""
-    pointing = np.asarray(pointing, dtype=float)
+    pointing = np.asarray(as_array("pointing", pointing, tail=(2,), finite=False), dtype=float)
     if (quat is None) == (joint_angles is None):
         raise ValueError("give exactly one of `quat` (S, N, 4) or `joint_angles` (S, N, 3)")
     if quat is None:

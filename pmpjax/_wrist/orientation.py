@@ -11,20 +11,41 @@ Conventions (all functions take leading batch axes and are differentiable):
   The inverse picks the branch ``|q_FE| < π/2`` (``cos q_FE > 0``) with ``q_PS, q_RUD ∈ (−π, π]``;
   every orientation with ``R[0, 1] ≠ ±1`` has exactly one such triple. The other branch
   ``(q_PS + π, π − q_FE, q_RUD + π)`` gives the same ``R`` and is never returned.
+
+Inputs are checked before tracing (``ValueError`` naming the argument for a wrong trailing shape,
+or NaN/inf when concrete; a zero quaternion is rejected).
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
+from .._base.validate import as_array, is_concrete
 from .._chains.kinematics import Wrist
 
 _WRIST = Wrist()
 
 
+def _arr(name, x, tail):
+    return jnp.asarray(as_array(name, x, tail=tail))
+
+
+def _quat(name, quat):
+    quat = _arr(name, quat, (4,))
+    if is_concrete(quat) and np.any(np.linalg.norm(np.asarray(quat), axis=-1) == 0):
+        raise ValueError(f"`{name}` contains a zero quaternion (no rotation)")
+    return quat
+
+
+def _convention(convention):
+    if convention not in ("axis_angle", "rodrigues"):
+        raise ValueError(f"`convention` must be 'axis_angle' or 'rodrigues', got {convention!r}")
+
+
 def wrist_rotation(q):
     """Hand orientation ``R(q)`` (..., 3, 3) of wrist joint angles ``q`` (..., 3) [rad] (Eq 6)."""
-    return _WRIST.rotation(jnp.asarray(q))
+    return _WRIST.rotation(_arr("q", q, (3,)))
 
 
 def _hat(r):
@@ -39,7 +60,7 @@ def quat_from_matrix(R):
     Shepperd's method: the largest of ``(w², x², y², z²)`` is computed from the diagonal and the
     others from off-diagonal sums, so the result is accurate for every rotation.
     """
-    R = jnp.asarray(R)
+    R = _arr("R", R, (3, 3))
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     tr = m00 + m11 + m22
     d = jnp.stack([tr, m00 - m11 - m22, -m00 + m11 - m22, -m00 - m11 + m22], -1)
@@ -64,7 +85,7 @@ def quat_from_matrix(R):
 
 def matrix_from_quat(quat):
     """Rotation matrix (..., 3, 3) of quaternions ``(w, x, y, z)`` (..., 4) (normalised first)."""
-    quat = jnp.asarray(quat)
+    quat = _quat("quat", quat)
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     w, x, y, z = (quat[..., i] for i in range(4))
     return jnp.stack(
@@ -80,14 +101,13 @@ def matrix_from_quat(quat):
 def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
     """Rotation vector (..., 3) of quaternions (..., 4); ``convention`` "axis_angle" (θ n, rad)
     or "rodrigues" (tan(θ/2) n)."""
-    quat = jnp.asarray(quat)
+    _convention(convention)
+    quat = _quat("quat", quat)
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     quat = jnp.where(quat[..., :1] < 0, -quat, quat)
     w, v = quat[..., 0], quat[..., 1:]
     if convention == "rodrigues":
         return v / w[..., None]
-    if convention != "axis_angle":
-        raise ValueError(f"`convention` must be 'axis_angle' or 'rodrigues', got {convention!r}")
     s2 = jnp.sum(v * v, axis=-1)
     small = s2 < 1e-12
     s = jnp.sqrt(jnp.where(small, 1.0, s2))
@@ -98,7 +118,7 @@ def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
 
 def quat_from_rotvec(r):
     """Quaternion ``(w, x, y, z)`` (..., 4) of axis·angle rotation vectors ``r`` (..., 3) [rad]."""
-    r = jnp.asarray(r)
+    r = _arr("r", r, (3,))
     t2 = jnp.sum(r * r, axis=-1)
     small = t2 < 1e-8
     t = jnp.sqrt(jnp.where(small, 1.0, t2))
@@ -110,12 +130,13 @@ def quat_from_rotvec(r):
 
 def rotvec_from_matrix(R, *, convention: str = "axis_angle"):
     """Rotation vector (..., 3) of rotation matrices (..., 3, 3) (see :func:`rotvec_from_quat`)."""
+    _convention(convention)
     return rotvec_from_quat(quat_from_matrix(R), convention=convention)
 
 
 def matrix_from_rotvec(r):
     """Rotation matrix ``exp(r̂)`` (..., 3, 3) of rotation vectors ``r`` (..., 3) [rad]."""
-    return matrix_from_quat(quat_from_rotvec(r))
+    return matrix_from_quat(quat_from_rotvec(_arr("r", r, (3,))))
 
 
 def joint_angles_from_matrix(R):
@@ -125,7 +146,7 @@ def joint_angles_from_matrix(R):
     ``(R[1,1], R[2,1]) = cos b (cos a, −sin a)``. Branch ``|q_FE| < π/2``; undefined at gimbal lock
     ``|q_FE| = π/2`` (the wrist points along the screen, outside every reachable target).
     """
-    R = jnp.asarray(R)
+    R = _arr("R", R, (3, 3))
     b = jnp.arctan2(-R[..., 0, 1], jnp.hypot(R[..., 0, 0], R[..., 0, 2]))
     c = jnp.arctan2(R[..., 0, 2], R[..., 0, 0])
     a = jnp.arctan2(-R[..., 2, 1], R[..., 1, 1])
@@ -134,17 +155,18 @@ def joint_angles_from_matrix(R):
 
 def joint_angles_from_quat(quat):
     """Wrist joint angles (..., 3) [rad] of quaternions ``(w, x, y, z)`` (..., 4)."""
-    return joint_angles_from_matrix(matrix_from_quat(quat))
+    return joint_angles_from_matrix(matrix_from_quat(_quat("quat", quat)))
 
 
 def quat_from_joint_angles(q):
     """Quaternion ``(w, x, y, z)`` (..., 4) of wrist joint angles ``q`` (..., 3) [rad]."""
-    return quat_from_matrix(wrist_rotation(q))
+    return quat_from_matrix(wrist_rotation(_arr("q", q, (3,))))
 
 
 def rotvec_from_joint_angles(q, *, convention: str = "axis_angle"):
     """Rotation vector ``r`` (..., 3) of the wrist posture ``q`` (..., 3) [rad] (design §3.4)."""
-    return rotvec_from_matrix(wrist_rotation(q), convention=convention)
+    _convention(convention)
+    return rotvec_from_matrix(wrist_rotation(_arr("q", q, (3,))), convention=convention)
 
 
 def torsion_between(R_ref, R):
@@ -153,5 +175,6 @@ def torsion_between(R_ref, R):
     For two postures pointing the same way, ``R_refᵀ R`` is a pure rotation about ``e_x`` and this
     is exactly its angle; otherwise it is the torsional component ``atan2(M21 − M12, M11 + M22)``.
     """
-    M = jnp.swapaxes(jnp.asarray(R_ref), -1, -2) @ jnp.asarray(R)
+    R_ref, R = _arr("R_ref", R_ref, (3, 3)), _arr("R", R, (3, 3))
+    M = jnp.swapaxes(R_ref, -1, -2) @ R
     return jnp.arctan2(M[..., 2, 1] - M[..., 1, 2], M[..., 1, 1] + M[..., 2, 2])

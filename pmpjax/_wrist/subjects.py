@@ -40,6 +40,8 @@ def subject_names() -> tuple[str, ...]:
 
 def load_subject(name: str, *, normalize: bool = True) -> Subject:
     """One subject of Tables 1–2 by name (``"subj1"`` … ``"subj6"``; ``"Subj 1"`` and ``1`` also work)."""
+    if not isinstance(normalize, bool | np.bool_):
+        raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
     key = str(name).lower().replace(" ", "")
     if key.isdigit():
         key = f"subj{key}"
@@ -55,5 +57,7 @@ def load_subject(name: str, *, normalize: bool = True) -> Subject:
 
 def paper_subjects(*, normalize: bool = True) -> tuple[list[str], np.ndarray, np.ndarray]:
     """All six subjects stacked: ``(names, KJ (6, 3, 3), q_rest (6, 3))``."""
+    if not isinstance(normalize, bool | np.bool_):
+        raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
     subs = [load_subject(n, normalize=normalize) for n in subject_names()]
     return [s.name for s in subs], np.stack([s.KJ for s in subs]), np.stack([s.q_rest for s in subs])
