@@ -59,6 +59,7 @@ import json
 import math
 import os
 import re
+import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -396,23 +397,35 @@ class _Store:
 
 
 class _LocalEngine:
-    """One compiled ``jit(shard_map(vmap(fn)))`` over the local devices; chunks dispatched one ahead."""
+    """One compiled ``jit(shard_map(vmap(fn)))`` over the local devices; chunks dispatched one ahead.
 
-    def __init__(self, fn, devices, chunk_rows):
+    Kernels are kept per (computation, devices, chunk length), so sweeps of the same ``fn`` with
+    other parameters (or a restart in the same process) reuse the compilation."""
+
+    _kernels: collections.OrderedDict = collections.OrderedDict()
+
+    def __init__(self, fn, devices, chunk_rows, kernel_key):
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-        self.devices = devices
         d = len(devices)
         self.length = math.ceil(chunk_rows / d) * d  # compiled rows per call (a multiple of the devices)
         if d == 1:
-            self.kernel = jax.jit(jax.vmap(fn))
             self.sharding = jax.sharding.SingleDeviceSharding(devices[0])
         else:
             mesh = Mesh(np.asarray(devices), ("rows",))
-            spec = PartitionSpec("rows")
-            self.kernel = jax.jit(jax.shard_map(jax.vmap(fn), mesh=mesh, in_specs=spec, out_specs=spec,
-                                                check_vma=False))
-            self.sharding = NamedSharding(mesh, spec)
+            self.sharding = NamedSharding(mesh, PartitionSpec("rows"))
+        key = (kernel_key, tuple(devices), self.length)
+        self.kernel = self._kernels.pop(key, None)
+        if self.kernel is None:
+            if d == 1:
+                self.kernel = jax.jit(jax.vmap(fn))
+            else:
+                spec = PartitionSpec("rows")
+                self.kernel = jax.jit(jax.shard_map(jax.vmap(fn), mesh=mesh, in_specs=spec, out_specs=spec,
+                                                    check_vma=False))
+        self._kernels[key] = self.kernel
+        while len(self._kernels) > 8:
+            self._kernels.popitem(last=False)
 
     def run(self, todo, chunk_params, done):
         pending = collections.deque()
@@ -431,12 +444,13 @@ _WORKER_KERNELS: dict[str, Any] = {}
 
 
 def _dask_chunk(fn, key: str, x64: bool, args: dict, rows: int) -> list[np.ndarray]:
-    """A Dask task: one chunk through ``jit(vmap(fn))``, compiled once per worker and sweep."""
+    """A Dask task: one chunk through ``jit(vmap(fn))``, compiled once per worker and computation."""
     if bool(jax.config.jax_enable_x64) != x64:
         jax.config.update("jax_enable_x64", x64)
     kernel = _WORKER_KERNELS.get(key)
     if kernel is None:
-        _WORKER_KERNELS.clear()
+        if len(_WORKER_KERNELS) >= 8:
+            _WORKER_KERNELS.pop(next(iter(_WORKER_KERNELS)))
         kernel = _WORKER_KERNELS[key] = jax.jit(jax.vmap(fn))
     return [np.asarray(a)[:rows] for a in jax.device_get(jax.tree_util.tree_leaves(kernel(args)))]
 
@@ -457,7 +471,7 @@ class _DaskEngine:
 
         def submit(k):
             return self.client.submit(_dask_chunk, self.fn, self.key, self.x64, chunk_params(k, self.length),
-                                      self.length, key=f"pmpjax-sweep-{self.key[:12]}-{k}", pure=False)
+                                      self.length, key=f"pmpjax-sweep-{self.key[:12]}-{k}-{uuid.uuid4().hex[:8]}")
 
         futures = {}
         ac = as_completed()
@@ -562,7 +576,8 @@ def sweep(
         "params": {k: [v.dtype.str, list(v.shape[1:])] for k, v in {**numeric, **labels}.items()},
     }
     store = _Store.open(out, manifest) if out is not None else None
-    key = hashlib.sha256(json.dumps(fingerprint, sort_keys=True).encode()).hexdigest()
+    ident = {k: fingerprint[k] for k in ("fn", "fn_source", "computation", "outputs")}
+    kernel_key = hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()
 
     results = [np.empty((n,) + shape, dtype=np.dtype(dt)) for _, dt, shape in leaves]
     reused = store.scan() if store is not None else {}
@@ -593,8 +608,8 @@ def sweep(
 
     try:
         if todo:
-            engine = (_DaskEngine(fn, client, chunk_rows, key) if client is not None
-                      else _LocalEngine(fn, devs, chunk_rows))
+            engine = (_DaskEngine(fn, client, chunk_rows, kernel_key) if client is not None
+                      else _LocalEngine(fn, devs, chunk_rows, kernel_key))
             engine.run(todo, chunk_params, done)
     finally:
         bar.close()
