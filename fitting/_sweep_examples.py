@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -67,3 +68,45 @@ def plot_curvature_map(anisotropy, rest_ps_deg, a_net, *, fig=None):
     fig.suptitle("λ0-PMP curvature A_net per target over stiffness anisotropy and rest posture")
     fig.tight_layout()
     return fig
+
+
+#: Donders power analysis: postures drawn per subject (rows use the first ``n_postures``).
+N_MAX = 64
+_DONDERS_STATUS = (0, int(Status.MAX_STEPS), int(Status.NONFINITE), int(Status.TOO_FEW_DATA))
+
+
+def donders_power_row(p, *, n_max: int = N_MAX, n_starts: int = 2, max_steps: int = 60,
+                      half_angle_deg: float = 20.0):
+    """One synthetic subject's NIO fit (the compiled fit behind ``fitting.fit_donders``) from
+    ``p["n_postures"]`` steady postures with ``p["noise_deg"]`` RMS orientation noise.
+
+    Row ``p``: ``logK`` (5,) and ``q_rest`` (3,) of the true subject (``fitting.params_from_stiffness``
+    parameterisation, trace 4), ``n_postures`` (<= ``n_max``), ``noise_deg`` [deg], ``seed``.
+    Data as ``pmpjax.synthetic_recordings`` makes them (jax.random instead of NumPy): targets
+    uniform on the ±``half_angle_deg`` screen square, equilibrium postures, a hand-frame noise
+    rotation with isotropic Gaussian rotation vector, and the pointing of the noisy orientation.
+    Returns ``KJ_error`` (max |KJ_fit − KJ| [Nm/rad]), ``KJ_fit`` (3, 3) and ``status``.
+    """
+    from pmpjax._pmp.equilibria import equilibrium_one
+
+    from ._donders import _fit_batch, _starts, stiffness_from_params
+
+    chain = pj.Wrist()
+    KJ = stiffness_from_params(p["logK"], 3)
+    q_rest = p["q_rest"]
+    key_t, key_n = jax.random.split(jax.random.PRNGKey(p["seed"]))
+    h = np.sin(np.deg2rad(half_angle_deg))
+    targets = jax.random.uniform(key_t, (n_max, 2), minval=-h, maxval=h)
+    q_eq = jax.vmap(lambda x: equilibrium_one(chain, KJ, q_rest, x, q_rest)[0])(targets)
+    eps = jax.random.normal(key_n, (n_max, 3)) * (jnp.deg2rad(p["noise_deg"]) / np.sqrt(3.0))
+    q_obs = pj.joint_angles_from_matrix(pj.wrist_rotation(q_eq) @ pj.matrix_from_rotvec(eps))
+    x_obs = chain.fk(q_obs)
+    w = (jnp.arange(n_max) < p["n_postures"]).astype(float)
+    q_mean = jnp.sum(q_obs * w[:, None], 0) / jnp.maximum(jnp.sum(w), 1.0)
+    # fit_donders' starts: isotropic KJ at the mean observed posture, then seeded perturbations
+    theta0 = jnp.asarray(_starts(np.zeros((1, 3)), 5, 3, n_starts, 0)).at[..., 5:].add(q_mean)
+    out = _fit_batch(chain, theta0, x_obs[None], q_obs[None], w[None], n_k=5, trace=4.0, kind="torsion",
+                     tol=1e-10, max_steps=max_steps, rcond=1e-2)
+    KJ_fit = out["KJ"][0]
+    status = jnp.asarray(_DONDERS_STATUS)[out["status"][0]]
+    return {"KJ_error": jnp.max(jnp.abs(KJ_fit - KJ)), "KJ_fit": KJ_fit, "status": status}
