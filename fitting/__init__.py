@@ -33,3 +33,9 @@ from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights
 from ._springy_arm import fit_stiffness as fit_stiffness
+from ._sweep import SweepResult as SweepResult
+from ._sweep import grid as grid
+from ._sweep import latin_hypercube as latin_hypercube
+from ._sweep import params_from_csv as params_from_csv
+from ._sweep import sobol as sobol
+from ._sweep import sweep as sweep

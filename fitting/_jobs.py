@@ -71,3 +71,57 @@ def donders_nio(out: Path, log) -> dict:
         "identifiable_directions": res.identifiable.sum(axis=-1).tolist(),
         "max_abs_z_identifiable_coefficients": z_ident.round(3).tolist(),
     }
+
+
+def sweeps(out: Path, log) -> dict:
+    """Parameter sweeps (issue 14) at small size: the curvature map (``A_net`` per target over
+    stiffness anisotropy × rest posture, figure) and a Donders-fit power analysis (how many
+    postures per subject recover ``KJ``), both through ``fitting.sweep`` with a resumable store."""
+    import functools
+    import tempfile
+
+    import matplotlib.pyplot as plt
+
+    import pmpjax as pj
+
+    from ._donders import params_from_stiffness
+    from ._sweep import grid, sweep
+    from ._sweep_examples import curvature_row, donders_power_row, plot_curvature_map
+
+    store = Path(tempfile.mkdtemp(prefix="pmpjax_sweeps_"))
+    anisotropy = np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
+    rest_ps = np.linspace(-15.0, 15.0, 7)
+    cmap = sweep(functools.partial(curvature_row, dt=0.01), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
+                 chunk_size=16, out=store / "curvature", progress=False)
+    a_net = cmap.outputs["A_net"].reshape(len(anisotropy), len(rest_ps), 8)
+    fig = plot_curvature_map(anisotropy, rest_ps, a_net)
+    fig.savefig(out / "curvature_map.png", dpi=110)
+    plt.close(fig)
+
+    names, KJ, q_rest = pj.paper_subjects()
+    n_values, reps, n_max = [16, 64, 256], 8, 256
+    g = grid(subject=np.arange(len(names)), n_postures=n_values, rep=np.arange(reps))
+    s = g["subject"]
+    params = {"subject": np.asarray(names)[s], "logK": params_from_stiffness(KJ)[s], "q_rest": q_rest[s],
+              "n_postures": g["n_postures"], "noise_deg": np.full(len(s), 0.5),
+              "seed": 1000 * s + 10 * g["rep"] + g["n_postures"]}
+    power = sweep(functools.partial(donders_power_row, n_max=n_max), params, chunk_size=16,
+                  out=store / "donders_power", progress=False)
+    err = power.outputs["KJ_error"].reshape(len(names), len(n_values), reps)
+    ok = ~power.failed.reshape(err.shape)
+    rms = np.sqrt(np.nanmean(np.where(ok, err, np.nan) ** 2, axis=(0, 2)))
+    within = {d: np.nanmean(np.where(ok, err < d, np.nan), axis=(0, 2)) for d in (0.1, 0.25, 0.5)}
+    log(f"sweeps: curvature map {cmap.outputs['A_net'].shape[0]} rows ({cmap.n_failed} failed), A_net "
+        f"{a_net.min():+.3f}..{a_net.max():+.3f}, figure -> {out / 'curvature_map.png'}; Donders power: "
+        + ", ".join(f"n={n}: RMS |ΔKJ| {r:.3f} Nm/rad, {100 * within[0.25][k]:.0f}% within 0.25"
+                    for k, (n, r) in enumerate(zip(n_values, rms))))
+    return {
+        "curvature_map": {"anisotropy": anisotropy.round(4).tolist(), "rest_ps_deg": rest_ps.tolist(),
+                          "directions": list(pj.DIRECTIONS), "A_net": a_net.round(5).tolist(),
+                          "failed": int(cmap.n_failed)},
+        "donders_power": {"subjects": list(names), "n_postures": n_values, "replicates": reps, "noise_deg": 0.5,
+                          "rms_KJ_error": rms.round(4).tolist(),
+                          "fraction_within": {str(d): v.round(3).tolist() for d, v in within.items()},
+                          "failed": int(power.n_failed),
+                          "reasons": sorted(set(power.reasons[power.failed].tolist()))},
+    }

@@ -23,6 +23,7 @@ NOT_ENTRY_POINTS = {
     "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",
     "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
     "fitting.StiffnessFit",
+    "fitting.SweepResult",
 }
 
 
