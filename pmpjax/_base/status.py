@@ -23,6 +23,7 @@ class Status(enum.IntEnum):
     SCHEDULE_END = 5
     INVALID_INPUT = 6
     TOO_FEW_DATA = 7
+    UNSTABLE = 8
 
     @property
     def message(self) -> str:
@@ -38,6 +39,7 @@ _MESSAGES = {
     Status.SCHEDULE_END: "the schedule ended (e.g. the null-space ratio γ reached 1) before the tolerance was met",
     Status.INVALID_INPUT: "input rejected (NaN/inf samples, rank-deficient Jacobians or out of range)",
     Status.TOO_FEW_DATA: "too few valid samples to fit",
+    Status.UNSTABLE: "converged to an unstable equilibrium (the Hessian is not positive definite)",
 }
 
 
