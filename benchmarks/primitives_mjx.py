@@ -1,37 +1,32 @@
-"""Batched MJX rollouts of the springy Cog-like arm vs the plain C ``mujoco.mj_step`` loop.
+"""Forward rollouts of the springy Cog-like arm: MJX vs C MuJoCo's batch rollout vs a C loop.
 
 Each rollout is 2 s (1000 steps of 2 ms) of the 6-DoF arm (contacts disabled, as for fits and
-gradients) with the spring law ``τ = −K (θ − θ_set) − B θ̇`` written into ``qfrc_applied`` every
-step; set-points differ per arm. MJX: ``pmpjax._springy_arm.arm._rollout_batch`` (``lax.scan`` over
-``mjx.step``, ``vmap`` over arms), compile time measured separately with ``.lower().compile()``,
-run time = min over repeats with ``block_until_ready``. Baseline, same process and model: the C
-loop in Python (set ``qfrc_applied``, ``mj_step``), one arm, then B arms one after another.
+gradients) with the spring law ``τ = −K (θ − θ_set) − B θ̇`` applied every step; set-points differ
+per arm. Compared in the same process, on the same model and inputs (final postures checked equal):
 
-Run: ``python benchmarks/primitives_mjx.py [--quick]``; writes benchmarks/results/primitives_mjx.json.
+- ``mjx``: ``pmpjax.rollout(..., backend="mjx")`` — ``lax.scan`` over ``mjx.step``, ``vmap`` over
+  arms; compile time measured apart (``.lower().compile()`` of the batch kernel);
+- ``c1`` / ``c2``: ``pmpjax.rollout(..., backend="mujoco", nthread=1 | 2)`` — MuJoCo's own
+  multi-threaded ``mujoco.rollout`` with the springs as affine actuators (no compile);
+- ``loop``: the baseline, a single-threaded Python loop of ``mj_step`` writing ``qfrc_applied``.
 
-Latest figures (2026-11-22, 2-core CPU, no GPU, other jobs running — load average ≈ 8, so
-absolute times are inflated; ratios are taken in the same run):
+Run times are the minimum of repeats (``block_until_ready`` for MJX). Run:
+``python benchmarks/primitives_mjx.py [--quick]``; writes ``benchmarks/results/primitives_mjx.json``.
 
-    batch | MJX compile [s] | MJX run [s] | MJX steps/s | C loop [s] | C steps/s | MJX/C speed
-    ------+-----------------+-------------+-------------+------------+-----------+------------
-        1 |           105.5 |       0.323 |       3 095 |      0.041 |    24 544 |       0.13
-       64 |           129.3 |       7.292 |       8 776 |      0.791 |    80 941 |       0.11
-     1024 |            48.0 |     160.159 |       6 394 |     10.045 |   101 946 |       0.06
+Latest figures (2026-12-01, 2-core CPU, no GPU, shared with other jobs: load average ≈ 12 at
+start and end, so absolute times are inflated several-fold; ratios are taken in the same run):
 
-(C loop for B = 1024 timed on 64 arms and scaled linearly.) On this CPU MJX loses everywhere:
-the C loop, even driven from Python one step at a time, is 8–16× faster per step. MJX's step for
-this 6-DoF arm is dominated by per-op overhead of many tiny kernels (kinematics scans, the
-constraint/sensor pipeline); batching helps only up to ~64 arms (3.1k → 8.8k steps/s) and then
-memory traffic of the (B, ·) state dominates. Compilation (48–130 s under load; ~3× less on an
-idle machine) costs more than 100 000 C steps. What MJX buys is jit/vmap/grad composition: exact
-reverse-mode gradients through rollouts (``tests/test_primitives.py``) and one code path for
-batches — not speed on a 2-core CPU; use C MuJoCo for plain forward simulation there.
+    FIGURES
+
+Reading: on this CPU the C path wins at every batch size. MuJoCo's batch rollout removes the
+Python overhead of the loop (one ``mj_step`` call per step) and runs the arms on both cores; MJX's
+step for this small arm is dominated by per-op overhead of many tiny kernels and costs a long
+compile. MJX is for what it alone gives: ``jax.grad``/``vmap``/``jit`` through rollouts.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 
@@ -42,55 +37,73 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+from _baselines import write_results  # noqa: E402
 
-from pmpjax import _arm  # noqa: E402
-from pmpjax._springy_arm.primitives import default_primitives  # noqa: E402
+import pmpjax as pj  # noqa: E402
+from pmpjax._springy_arm import arm as arm_mod  # noqa: E402
 
 STEPS = 1000  # 2 s at dt = 2 ms
 
 
-def mjx_case(arm, B, repeats):
+def set_points(B: int) -> np.ndarray:
     rng = np.random.default_rng(0)
-    P = np.asarray(default_primitives())
-    alpha = rng.dirichlet(np.ones(4), size=B)
-    q_set = jnp.asarray(np.broadcast_to((alpha @ P)[:, None, :], (B, STEPS, 6)))
+    P = np.asarray(pj.default_primitives())
+    return np.broadcast_to((rng.dirichlet(np.ones(4), size=B) @ P)[:, None, :], (B, STEPS, 6)).copy()
+
+
+def best_of(fn, repeats):
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def mjx_case(arm, q_set, repeats):
+    """Compile and run the MJX batch kernel behind ``rollout(..., backend="mjx")``."""
+    B = q_set.shape[0]
+    q_set = jnp.asarray(q_set)
     K = jnp.broadcast_to(jnp.asarray(arm.K), (B, 6))
     Bd = jnp.broadcast_to(jnp.asarray(arm.B), (B, 6))
-    q0 = jnp.broadcast_to(jnp.asarray(arm.q_rest), (B, 6))
+    q0 = q_set[:, 0]
     z = jnp.zeros((B, 6))
-    probe = jnp.broadcast_to(jnp.asarray(_arm.PROBE_PARK), (B, STEPS, 3))
+    probe = jnp.broadcast_to(jnp.asarray(arm_mod.PROBE_PARK), (B, STEPS, 3))
     force = jnp.zeros((B, STEPS, 3))
-    ctrl = _arm.Scripted()
+    ctrl = arm_mod.Scripted()
     c0 = jax.vmap(ctrl.init)(q0)
     args = (arm.mjx_model, arm.layout, ctrl, K, Bd, q0, z, q0, c0, (q_set, probe, force))
     t0 = time.perf_counter()
-    compiled = _arm._rollout_batch.lower(*args).compile()
+    compiled = arm_mod._rollout_batch.lower(*args).compile()
     compile_s = time.perf_counter() - t0
     dyn = args[:1] + args[2:]
     jax.block_until_ready(compiled(*dyn))
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(compiled(*dyn))
-        best = min(best, time.perf_counter() - t0)
-    return compile_s, best, np.asarray(q_set[:, 0])
+    run, out = best_of(lambda: jax.block_until_ready(compiled(*dyn)), repeats)
+    return compile_s, run, np.asarray(out[1])
 
 
-def c_case(arm, q_sets, repeats):
+def loop_case(arm, q_set, repeats):
+    """Baseline: one arm after another, ``mj_step`` in Python with the torque in ``qfrc_applied``."""
     m = arm.mj_model
     d = mujoco.MjData(m)
     K, Bd = arm.K, arm.B
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for q_set in q_sets:
+
+    def run():
+        out = []
+        for qs in q_set:
             mujoco.mj_resetData(m, d)
-            d.qpos[:] = arm.q_rest
-            for _ in range(STEPS):
-                d.qfrc_applied[:] = -K * (d.qpos - q_set) - Bd * d.qvel
+            d.qpos[:] = qs[0]
+            for k in range(STEPS):
+                d.qfrc_applied[:] = -K * (d.qpos - qs[k]) - Bd * d.qvel
                 mujoco.mj_step(m, d)
-        best = min(best, time.perf_counter() - t0)
-    return best
+            out.append(d.qpos.copy())
+        return np.array(out)
+
+    return best_of(run, repeats)
+
+
+def c_case(arm, q_set, nthread, repeats):
+    return best_of(lambda: pj.rollout(arm, q_set, backend="mujoco", nthread=nthread).q_final, repeats)
 
 
 def main():
@@ -98,44 +111,49 @@ def main():
     ap.add_argument("--quick", action="store_true", help="batch sizes 1 and 64 only")
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args()
-    arm = _arm.load_arm(contacts=False)
+    load0 = os.getloadavg()
+    arm = pj.load_arm(contacts=False)
     sizes = (1, 64) if a.quick else (1, 64, 1024)
     rows = []
-    c1 = None
     for B in sizes:
-        comp, run, q_sets = mjx_case(arm, B, a.repeats)
-        # C baseline: B arms sequentially (for B = 1024 time 64 arms and scale, it is linear).
-        nc = min(B, 64)
-        c_run = c_case(arm, q_sets[:nc], 1 if nc > 1 else a.repeats) * B / nc
-        if B == 1:
-            c1 = c_run
-        row = dict(
-            batch=B,
-            steps=B * STEPS,
-            mjx_compile_s=comp,
-            mjx_run_s=run,
-            mjx_steps_per_s=B * STEPS / run,
-            c_run_s=c_run,
-            c_steps_per_s=B * STEPS / c_run,
-            mjx_over_c_speed=c_run / run,
-        )
+        q_set = set_points(B)
+        nl = min(B, 64)  # the Python loop is linear in B: time 64 arms and scale
+        loop_s, q_loop = loop_case(arm, q_set[:nl], a.repeats if nl == 1 else 1)
+        loop_s *= B / nl
+        c1_s, q_c1 = c_case(arm, q_set, 1, a.repeats)
+        c2_s, q_c2 = c_case(arm, q_set, 2, a.repeats)
+        row = dict(batch=B, steps=B * STEPS, loop_s=loop_s, c1_s=c1_s, c2_s=c2_s)
+        if B <= 64 or not a.quick:
+            comp, run, q_mjx = mjx_case(arm, q_set, a.repeats)
+            row.update(mjx_compile_s=comp, mjx_s=run)
+            assert np.abs(q_mjx - q_c1).max() < 1e-10
+        assert np.abs(q_c1[:nl] - q_loop).max() < 1e-10 and np.array_equal(q_c1, q_c2)
+        for k in ("loop", "c1", "c2", "mjx"):
+            if f"{k}_s" in row:
+                row[f"{k}_steps_per_s"] = B * STEPS / row[f"{k}_s"]
+                row[f"{k}_speedup_vs_loop"] = loop_s / row[f"{k}_s"]
         rows.append(row)
+        mjx = (
+            f" | MJX compile {row['mjx_compile_s']:6.1f} s run {row['mjx_s']:8.3f} s "
+            f"{row['mjx_steps_per_s']:>10,.0f}/s ×{row['mjx_speedup_vs_loop']:.2f}"
+            if "mjx_s" in row
+            else ""
+        )
         print(
-            f"B={B:5d}  MJX compile {comp:6.1f} s  run {run:8.3f} s  "
-            f"{row['mjx_steps_per_s']:10.0f} steps/s | C loop {c_run:8.3f} s  "
-            f"{row['c_steps_per_s']:10.0f} steps/s | MJX/C speed {row['mjx_over_c_speed']:.2f}"
+            f"B={B:5d} | loop {loop_s:8.3f} s {row['loop_steps_per_s']:>10,.0f}/s"
+            f" | C 1 thread {c1_s:8.3f} s {row['c1_steps_per_s']:>10,.0f}/s ×{row['c1_speedup_vs_loop']:.2f}"
+            f" | C 2 threads {c2_s:8.3f} s {row['c2_steps_per_s']:>10,.0f}/s ×{row['c2_speedup_vs_loop']:.2f}" + mjx
         )
     out = dict(
-        date="2026-11-22",
-        machine="2-core CPU, no GPU (shared, loaded)",
+        date=time.strftime("%Y-%m-%d"),
+        machine="2-core CPU, no GPU (shared)",
+        load_average_start=load0,
+        load_average_end=os.getloadavg(),
         steps_per_rollout=STEPS,
         dt=arm.dt,
-        c_one_arm_s=c1,
         rows=rows,
     )
-    os.makedirs(os.path.join(os.path.dirname(__file__), "results"), exist_ok=True)
-    with open(os.path.join(os.path.dirname(__file__), "results", "primitives_mjx.json"), "w") as f:
-        json.dump(out, f, indent=2)
+    print("results ->", write_results("primitives_mjx", out))
 
 
 if __name__ == "__main__":

@@ -1,9 +1,11 @@
 """Fits on the springy arm (Williamson 1996): blend weights that place the hand, stiffness from sag.
 
 Both go through the shared Levenberg–Marquardt loop (``fitting._optimise.least_squares``) and
-differentiate the gravity equilibrium by the implicit function theorem
-(``pmpjax._springy_arm.primitives.equilibrium``). Each target / subject is one vmapped item with its own
-convergence flag.
+differentiate the gravity equilibrium by the implicit function theorem through the documented
+internal kernel ``pmpjax._springy_arm.primitives.arm_equilibrium_one``. Each target / subject is
+one vmapped item with its own status (:class:`pmpjax.Status`); one failing item never stops or
+poisons the others. Flat batches are padded to a power of two (>= 8) so similar calls share one
+compile (a single item and a batch of 3 compile once).
 """
 
 from __future__ import annotations
@@ -14,11 +16,20 @@ import jax
 import jax.numpy as jnp
 
 from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.validate import as_array
-from pmpjax._springy_arm.arm import CogArm
-from pmpjax._springy_arm.primitives import _equilibrium_one, check_set_point, check_stiffness
+from pmpjax._base.status import Status
+from pmpjax._base.validate import as_array, check_positive, check_positive_int
+from pmpjax._springy_arm.arm import CogArm, check_arm
+from pmpjax._springy_arm.primitives import (
+    arm_equilibrium_one,
+    batch_bucket,
+    check_set_point,
+    check_stiffness,
+    pad_rows,
+)
 
 from ._optimise import least_squares
+
+N_NEWTON = 12  # Newton steps per equilibrium inside the fits (quadratic convergence from θ_set)
 
 
 def _softmax_weights(z):
@@ -26,17 +37,31 @@ def _softmax_weights(z):
     return jax.nn.softmax(jnp.concatenate([z, jnp.zeros(1, z.dtype)]))
 
 
+def _fit_status(finite, optimiser_converged, reached=True):
+    return jnp.where(
+        ~finite,
+        Status.NONFINITE,
+        jnp.where(optimiser_converged, jnp.where(reached, Status.SUCCESSFUL, Status.STALLED), Status.MAX_STEPS),
+    ).astype(jnp.int32)
+
+
 @pytree_dataclass
 class BlendFit:
     """``alpha`` (..., k) fitted weights (Σα = 1, α > 0); ``hand`` (..., 3) [m] equilibrium hand
-    position; ``error`` (...,) [m] distance to the target; ``converged`` (...,) bool (optimiser
-    converged and the target reached within ``tol``); ``steps`` (...,)."""
+    position; ``error`` (...,) [m] distance to the target; ``status`` (...,) int
+    (:class:`pmpjax.Status`: ``SUCCESSFUL`` = target reached within ``tol``; ``STALLED`` = the
+    optimiser settled on the closest blend of a target outside the region the primitives span;
+    ``MAX_STEPS``; ``NONFINITE``); ``converged`` = ``status == 0``; ``steps`` (...,)."""
 
     alpha: jax.Array
     hand: jax.Array
     error: jax.Array
-    converged: jax.Array
+    status: jax.Array
     steps: jax.Array
+
+    @property
+    def converged(self):
+        return self.status == Status.SUCCESSFUL
 
 
 def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_steps: int = 50) -> BlendFit:
@@ -44,8 +69,9 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     hand at ``target`` (..., 3) [m]. ``P`` (k, n) primitives [rad]; ``K`` (n,) stiffness.
 
     ``α = softmax(z, 0)`` keeps the blend a superposition (Σα = 1, α > 0), so targets outside the
-    region the primitives span are reported with ``converged=False`` and the closest blend.
+    region the primitives span are reported with status ``STALLED`` and the closest blend.
     """
+    check_arm(arm)
     n = arm.n
     P = jnp.asarray(as_array("P", P, tail=(None, n)), float)
     if P.ndim != 2 or P.shape[0] < 2:
@@ -54,15 +80,21 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     K = check_stiffness("K", arm.K if K is None else K, n)
     if K.shape != (n,):
         raise ValueError(f"`K` must have shape ({n},), got {K.shape}")
+    check_positive("tol", tol)
+    max_steps = check_positive_int("max_steps", max_steps)
     batch = target.shape[:-1]
-    res = _fit_blend(arm.mjx_model, arm.layout.hand_site, P, K, target.reshape(-1, 3), int(max_steps))
-    alpha, hand, steps, conv = res
-    err = jnp.linalg.norm(hand - target.reshape(-1, 3), axis=-1)
+    flat = target.reshape(-1, 3)
+    B = flat.shape[0]
+    alpha, hand, steps, conv = (
+        a[:B] for a in _fit_blend(arm.mjx_model, arm.layout.hand_site, P, K, pad_rows(flat, batch_bucket(B)), max_steps)
+    )
+    err = jnp.linalg.norm(hand - flat, axis=-1)
+    finite = jnp.isfinite(err) & jnp.all(jnp.isfinite(alpha), axis=-1)
     return BlendFit(
         alpha=alpha.reshape(batch + (P.shape[0],)),
         hand=hand.reshape(batch + (3,)),
         error=err.reshape(batch),
-        converged=(conv & (err <= tol)).reshape(batch),
+        status=_fit_status(finite, conv, err <= tol).reshape(batch),
         steps=steps.reshape(batch),
     )
 
@@ -70,8 +102,7 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
 @functools.partial(jax.jit, static_argnames=("site_id", "max_steps"))
 def _fit_blend(mx, site_id, P, K, targets, max_steps):
     def hand_of(z):
-        _, hand, _, _ = _equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, 12, 0.0, diagnostics=False)
-        return hand
+        return arm_equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, n_iter=N_NEWTON)[1]
 
     def one(target):
         r = least_squares(lambda z, _: hand_of(z) - target, jnp.zeros(P.shape[0] - 1), max_steps=max_steps)
@@ -83,12 +114,17 @@ def _fit_blend(mx, site_id, P, K, targets, max_steps):
 @pytree_dataclass
 class StiffnessFit:
     """``K`` (..., n) [Nm/rad] fitted joint stiffness; ``rms`` (...,) [rad] RMS posture residual;
-    ``converged`` (...,) bool; ``steps`` (...,)."""
+    ``status`` (...,) int (:class:`pmpjax.Status`: ``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``);
+    ``converged`` = ``status == 0``; ``steps`` (...,)."""
 
     K: jax.Array
     rms: jax.Array
-    converged: jax.Array
+    status: jax.Array
     steps: jax.Array
+
+    @property
+    def converged(self):
+        return self.status == Status.SUCCESSFUL
 
 
 def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 50) -> StiffnessFit:
@@ -98,30 +134,36 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
     Use postures that load every joint (the gravity torque on a joint must be non-zero in some
     posture, or its stiffness is unidentifiable). Leading axes of ``q_observed`` are subjects.
     """
+    check_arm(arm)
     n = arm.n
     q_set = check_set_point("q_set", q_set, n)
     if q_set.ndim != 2:
         raise ValueError(f"`q_set` must be (P, {n}) set-points, got {q_set.shape}")
     q_obs = jnp.asarray(as_array("q_observed", q_observed, tail=q_set.shape), float)
     K0 = check_stiffness("K0", arm.K if K0 is None else K0, n)
+    if K0.shape != (n,):
+        raise ValueError(f"`K0` must have shape ({n},), got {K0.shape}")
+    max_steps = check_positive_int("max_steps", max_steps)
     batch = q_obs.shape[:-2]
     flat = q_obs.reshape((-1,) + q_set.shape)
-    kappa, rms, steps, conv = _fit_stiffness(
-        arm.mjx_model, arm.layout.hand_site, q_set, flat, jnp.log(K0), int(max_steps)
+    B = flat.shape[0]
+    kappa, rms, steps, conv = (
+        a[:B] for a in _fit_stiffness(arm.mjx_model, q_set, pad_rows(flat, batch_bucket(B)), jnp.log(K0), max_steps)
     )
+    finite = jnp.isfinite(rms) & jnp.all(jnp.isfinite(kappa), axis=-1)
     return StiffnessFit(
         K=jnp.exp(kappa).reshape(batch + (n,)),
         rms=rms.reshape(batch),
-        converged=conv.reshape(batch),
+        status=_fit_status(finite, conv).reshape(batch),
         steps=steps.reshape(batch),
     )
 
 
-@functools.partial(jax.jit, static_argnames=("site_id", "max_steps"))
-def _fit_stiffness(mx, site_id, q_set, q_obs, kappa0, max_steps):
+@functools.partial(jax.jit, static_argnames=("max_steps",))
+def _fit_stiffness(mx, q_set, q_obs, kappa0, max_steps):
     def resid(kappa, q_o):
         K = jnp.exp(kappa)
-        q = jax.vmap(lambda qs: _equilibrium_one(mx, None, qs, K, 12, 0.0, diagnostics=False)[0])(q_set)
+        q = jax.vmap(lambda qs: arm_equilibrium_one(mx, None, qs, K, n_iter=N_NEWTON)[0])(q_set)
         return (q - q_o).reshape(-1)
 
     def one(q_o):
@@ -129,3 +171,5 @@ def _fit_stiffness(mx, site_id, q_set, q_obs, kappa0, max_steps):
         return r.x, jnp.sqrt(2.0 * r.cost / r.residual.shape[0]), r.steps, r.converged
 
     return jax.vmap(one)(q_obs)
+
+

@@ -52,6 +52,7 @@ from ._springy_arm.plots import plot_reflex as plot_reflex
 from ._springy_arm.plots import plot_summed_moves as plot_summed_moves
 from ._springy_arm.primitives import ArmEquilibrium as ArmEquilibrium
 from ._springy_arm.primitives import Moves as Moves
+from ._springy_arm.primitives import arm_equilibrium as arm_equilibrium
 from ._springy_arm.primitives import blend as blend
 from ._springy_arm.primitives import default_primitives as default_primitives
 from ._springy_arm.primitives import equilibrium as equilibrium

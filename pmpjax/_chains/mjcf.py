@@ -2,8 +2,9 @@
 
 It lets the λ0-PMP (``pmpjax.simulate``) plan joint trajectories for any MJCF model with hinge
 and slide joints, e.g. set-point trajectories for the springy arm (``pmpjax.load_arm``). The
-Jacobian is ``jax.jacfwd`` of ``mjx.kinematics``; the MJX model is a pytree leaf container, so
-the chain can be passed through ``jax.jit`` like the other chains.
+Jacobian is in closed form from one ``mjx.kinematics`` pass (as ``mj_jacSite``); the MJX model is
+a pytree leaf container, so the chain can be passed through ``jax.jit`` like the other chains.
+MuJoCo and MJX are imported on first use (``pmpjax._base.mujoco``), not by ``import pmpjax``.
 """
 
 from __future__ import annotations
@@ -13,35 +14,31 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import mujoco
 import numpy as np
-from mujoco import mjx
 
+from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
 from .kinematics import Chain
 
+_HINGE = 3  # mujoco.mjtJoint.mjJNT_HINGE
 
-def _mj_model(xml_or_model) -> mujoco.MjModel:
-    from .._springy_arm.arm import CogArm, _as_mj_model
 
-    if isinstance(xml_or_model, CogArm):
-        return xml_or_model.mj_model
-    return _as_mj_model(xml_or_model)
+def _mj_model(xml_or_model):
+    """An ``MjModel`` from a path, MJCF string, model, or an object carrying one as ``mj_model``
+    (e.g. ``pmpjax.CogArm``)."""
+    inner = getattr(xml_or_model, "mj_model", None)
+    if is_mj_model(inner):
+        return inner
+    return load_mj_model(xml_or_model)
 
 
 def kinematics(mx, q):
     """MJX forward kinematics at joint positions ``q`` (nq,): an ``mjx.Data`` with ``xpos``,
     ``xipos``, ``site_xpos`` etc. filled in."""
+    mjx = import_mjx()
     with jax.numpy_rank_promotion("allow"):
         d = mjx.make_data(mx).replace(qpos=q)
         return mjx.kinematics(mx, d)
-
-
-def gravity_potential(mx, q):
-    """Gravitational potential energy ``V(q) = −Σ_b m_b gᵀ c_b(q)`` [J] (scalar), with ``c_b`` the
-    bodies' centres of mass."""
-    d = kinematics(mx, q)
-    return -jnp.sum(mx.body_mass * (d.xipos @ mx.opt.gravity))
 
 
 def gravity_gradient(mx, q):
@@ -52,8 +49,14 @@ def gravity_gradient(mx, q):
     subtree mass ``M_j`` with centre ``C_j``, ``∂V/∂q_j = −gᵀ (a_j × M_j (C_j − p_j))``; for a
     slide, ``−M_j gᵀ a_j``.
     """
+    return gravity_from_kinematics(mx, kinematics(mx, q))
+
+
+def gravity_from_kinematics(mx, d):
+    """``∇V`` (nv,) [Nm] (see :func:`gravity_gradient`) from the kinematics fields (``xipos``,
+    ``xanchor``, ``xaxis``) of an ``mjx.Data``, e.g. the one ``mjx.step`` returns: those fields
+    are for the posture at the start of that step."""
     with jax.numpy_rank_promotion("allow"):
-        d = kinematics(mx, q)
         mass = _subtree_mask(mx) * mx.body_mass[None, :]
         M = jnp.sum(mass, axis=1)[:, None]
         arm = mass @ d.xipos - M * d.xanchor  # M_j (C_j − p_j)
@@ -75,7 +78,7 @@ def _subtree_mask(mx) -> np.ndarray:
 
 
 def _is_hinge(mx) -> np.ndarray:
-    return np.asarray(mx.jnt_type)[:, None] == int(mujoco.mjtJoint.mjJNT_HINGE)
+    return np.asarray(mx.jnt_type)[:, None] == _HINGE
 
 
 def _moves_joint(mx) -> np.ndarray:
@@ -109,11 +112,6 @@ def gravity_terms(mx, q):
         return -(inner @ mx.opt.gravity), jnp.where(R.T, G.T, jnp.where(R, G, 0.0)), d
 
 
-def gravity_hessian(mx, q):
-    """``∇²V(q)`` (nv, nv) [Nm/rad], exact, hinge joints only (see :func:`gravity_terms`)."""
-    return gravity_terms(mx, q)[1]
-
-
 def site_jacobian(mx, site_id: int, q):
     """Site position ``x`` (3,) and translational Jacobian ``J`` (3, nv) at ``q`` from one MJX
     kinematics pass (as ``mj_jacSite``): column j is ``a_j × (x − p_j)`` for a hinge moving the
@@ -144,12 +142,20 @@ def site_position(mx, site_id: int, q):
     return _site_pos(int(site_id), mx, q)
 
 
+@functools.partial(jax.jit, static_argnums=(1,))
+def _site_jacobians(mx, site_id: int, q):
+    """Site positions (B, 3) and Jacobians (B, 3, nv) at postures ``q`` (B, nv); jitted, so eager
+    calls compile one kinematics pass per shape instead of dispatching it op by op."""
+    return jax.vmap(lambda qq: site_jacobian(mx, site_id, qq))(q)
+
+
 @pytree_dataclass
 class MjcfChain(Chain):
     """Hand/site position ``x`` (3,) [m] of a MuJoCo model, ``q`` (nq,) joint positions.
 
     ``MjcfChain(xml_or_model, site)``: ``xml_or_model`` a path, MJCF string, ``mujoco.MjModel``
-    or :class:`CogArm`; ``site`` the site name. Only hinge and slide joints (``nq == nv``).
+    or an object holding one as ``mj_model`` (:class:`pmpjax.CogArm`); ``site`` the site name.
+    Only hinge and slide joints (``nq == nv``).
     ``reachable`` accepts points closer to the first joint than 0.99 × the summed link offsets.
     """
 
@@ -161,6 +167,7 @@ class MjcfChain(Chain):
     reach: float = static_field(default=np.inf)
 
     def __init__(self, xml_or_model, site: str):
+        mujoco = import_mujoco()
         m = _mj_model(xml_or_model)
         if not isinstance(site, str):
             raise TypeError(f"`site` must be a site name (str), got {type(site).__name__}")
@@ -185,7 +192,7 @@ class MjcfChain(Chain):
         mujoco.mj_kinematics(m, d)
         center = d.xanchor[m.body_jntadr[root]]
         with jax.numpy_rank_promotion("allow"):
-            mx = mjx.put_model(m)
+            mx = import_mjx().put_model(m)
         object.__setattr__(self, "mjx_model", mx)
         object.__setattr__(self, "site_id", int(sid))
         object.__setattr__(self, "n", int(m.nq))
@@ -198,8 +205,7 @@ class MjcfChain(Chain):
         return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
-        flat = qc.reshape(self.n, -1).T
-        x, J = jax.vmap(lambda q: site_jacobian(self.mjx_model, self.site_id, q))(flat)
+        x, J = _site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
         batch = qc.shape[1:]
         return x.T.reshape((3,) + batch), jnp.moveaxis(J, 0, -1).reshape((3, self.n) + batch)
 

@@ -5,16 +5,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._base.validate import as_array, check_positive, check_positive_int
+from .._chains.mjcf import MjcfChain
 from .arm import JOINTS, ArmTrajectory
 from .primitives import Moves, force_field, summed_moves
+
+
+def _check_joint(joint, n: int, name: str = "joint") -> int:
+    if isinstance(joint, bool) or not isinstance(joint, int | np.integer) or not 0 <= joint < n:
+        raise ValueError(f"`{name}` must be a joint index in [0, {n}), got {joint!r}")
+    return int(joint)
 
 
 def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
     """Figure 4: the individual moves' set-points and velocities (thin) and their sum (dotted)."""
     import matplotlib.pyplot as plt
 
+    p_all, v_all = summed_moves(moves, start, t)  # validates moves, start, t
     t = np.asarray(t, float)
     start = np.atleast_1d(np.asarray(start, float))
+    joint = _check_joint(joint, start.shape[-1])
     fig, (ax_p, ax_v) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
     base = start.copy()
     for j in range(np.shape(moves.delta)[0]):
@@ -23,9 +33,8 @@ def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
         ax_p.plot(t, np.asarray(p)[:, joint], lw=1, label=f"move {j + 1}")
         ax_v.plot(t, np.asarray(v)[:, joint], lw=1)
         base = base + np.asarray(moves.delta[j])
-    p, v = summed_moves(moves, start, t)
-    ax_p.plot(t, np.asarray(p)[:, joint], "k:", lw=2, label="sum")
-    ax_v.plot(t, np.asarray(v)[:, joint], "k:", lw=2)
+    ax_p.plot(t, np.asarray(p_all)[:, joint], "k:", lw=2, label="sum")
+    ax_v.plot(t, np.asarray(v_all)[:, joint], "k:", lw=2)
     ax_p.set_ylabel("set-point [rad]")
     ax_v.set_ylabel("velocity [rad/s]")
     ax_v.set_xlabel("time [s]")
@@ -38,6 +47,13 @@ def plot_reflex(traj: ArmTrajectory, *, joint: int = 0, sensor: str = "palm", ti
     for ``sensor="torque"``), set-point (solid) and actual joint angle (dashed) below."""
     import matplotlib.pyplot as plt
 
+    if not isinstance(traj, ArmTrajectory):
+        raise TypeError(f"`traj` must be an ArmTrajectory, got {type(traj).__name__}")
+    if np.ndim(traj.q) != 2:
+        raise ValueError(f"`traj` must be one arm's trajectory (q (T, n)); index a batch first, got {np.shape(traj.q)}")
+    joint = _check_joint(joint, np.shape(traj.q)[-1])
+    if sensor not in ("palm", "back", "torque"):
+        raise ValueError(f"`sensor` must be 'palm', 'back' or 'torque', got {sensor!r}")
     t = np.asarray(traj.t)
     fig, (ax_s, ax_q) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
     if sensor == "torque":
@@ -66,7 +82,17 @@ def plot_force_field(chain, q_set, K, *, joints=(0, 3), span: float = 0.6, n: in
     (least squares) is drawn at the hand (paper Section 2.2, frog-leg fields of Figure 2)."""
     import matplotlib.pyplot as plt
 
-    q_set = np.asarray(q_set, float)
+    if not isinstance(chain, MjcfChain):
+        raise TypeError(f"`chain` must be a pmpjax.MjcfChain, got {type(chain).__name__}")
+    q_set = np.asarray(as_array("q_set", q_set, tail=(chain.n,)), float)
+    if q_set.ndim != 1:
+        raise ValueError(f"`q_set` must be one set-point (n,), got shape {q_set.shape}")
+    if len(joints) != 2 or joints[0] == joints[1]:
+        raise ValueError(f"`joints` must be two different joint indices, got {joints!r}")
+    for j in joints:
+        _check_joint(j, q_set.shape[0], "joints")
+    check_positive("span", span)
+    n = check_positive_int("n", n)
     a = np.linspace(-span, span, n)
     A, Bg = np.meshgrid(a, a, indexing="ij")
     q = np.broadcast_to(q_set, A.shape + q_set.shape).copy()

@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, is_concrete
+from .._base.status import Status
+from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
 from .._chains.mjcf import MjcfChain, gravity_gradient, gravity_terms, site_position
 from .._pmp.redundancy import weighted_pinv
-from .arm import CogArm
+from .arm import CogArm, check_arm
 
 # ----------------------------------------------------------------------------------------------
 # Primitives and their combination
@@ -38,7 +40,7 @@ PRIMITIVES = (
 
 
 def default_primitives():
-    """The four primitives ``P`` (4, 6) [rad] named in ``PRIMITIVE_NAMES``."""
+    """The four primitives ``P`` (4, 6) [rad] named in ``PRIMITIVE_NAMES`` (rest, down, up, side)."""
     return jnp.asarray(PRIMITIVES, dtype=float)
 
 
@@ -58,7 +60,7 @@ def blend(alpha, P, *, atol: float = 1e-9):
     """Superposition ``Σ_i α_i P_i`` (..., n) of primitives ``P`` (k, n) with weights ``alpha``
     (..., k), ``Σ α_i = 1`` (checked to ``atol`` when concrete; ``ValueError`` naming ``alpha``).
     Negative weights are allowed (extrapolation) but leave the region the primitives span."""
-    P = jnp.asarray(as_array("P", P, tail=(None, None)), float)
+    P = _check_primitives(P)
     k = P.shape[-2]
     alpha = as_array("alpha", alpha, tail=(k,))
     if is_concrete(alpha):
@@ -71,10 +73,17 @@ def blend(alpha, P, *, atol: float = 1e-9):
 def winner_take_all(scores, P):
     """Winner-take-all: the primitive ``P[argmax(scores)]`` (..., n) of ``P`` (k, n) for
     activation ``scores`` (..., k) — one primitive has control of the arm."""
-    P = jnp.asarray(as_array("P", P, tail=(None, None)), float)
+    P = _check_primitives(P)
     scores = jnp.asarray(as_array("scores", scores, tail=(P.shape[-2],)), float)
     onehot = jax.nn.one_hot(jnp.argmax(scores, axis=-1), P.shape[-2], dtype=P.dtype)
     return jnp.einsum("...k,...kn->...n", onehot, P)
+
+
+def _check_primitives(P):
+    P = as_array("P", P, tail=(None, None))
+    if P.ndim != 2 or P.shape[0] < 1:
+        raise ValueError(f"`P` must be (k, n) primitives (k >= 1 set-point vectors), got shape {P.shape}")
+    return jnp.asarray(P, float)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -84,13 +93,19 @@ def winner_take_all(scores, P):
 @pytree_dataclass
 class ArmEquilibrium:
     """Static posture of the springy arm: ``q`` (..., n) [rad], ``hand`` (..., 3) [m],
-    ``residual`` (...,) |K (q − θ_set) + ∇V|_∞ [Nm], ``converged`` (...,) bool (residual small
-    and the Hessian ``K + ∇²V`` positive definite: a stable equilibrium)."""
+    ``residual`` (...,) |K (q − θ_set) + ∇V|_∞ [Nm], ``status`` (...,) int (:class:`pmpjax.Status`:
+    ``SUCCESSFUL`` = residual small and the Hessian ``K + ∇²V`` positive definite, a stable
+    equilibrium; ``NOT_MINIMUM``, ``MAX_STEPS`` (residual not small), ``NONFINITE``);
+    ``converged`` = ``status == 0``."""
 
     q: jax.Array
     hand: jax.Array
     residual: jax.Array
-    converged: jax.Array
+    status: jax.Array
+
+    @property
+    def converged(self):
+        return self.status == Status.SUCCESSFUL
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -140,36 +155,88 @@ def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
     return q, hand, res, (res <= tol * (1.0 + jnp.max(Ks))) & stable
 
 
-def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
+def batch_bucket(B: int) -> int:
+    """Padded size of a flat batch of ``B`` items: a power of two >= 8, so calls of similar size
+    share one compile (the rule of ``pmpjax._pmp.equilibria``). Internal surface for ``fitting``."""
+    return max(8, 1 << (max(B, 1) - 1).bit_length())
+
+
+def pad_rows(a, size: int):
+    """``a`` (B, ...) padded to (size, ...) by repeating its first row (valid data, dropped later)."""
+    B = a.shape[0]
+    return jnp.concatenate([a, jnp.broadcast_to(a[:1], (size - B,) + a.shape[1:])]) if size > B else a
+
+
+def arm_equilibrium_one(mx, site_id: int | None, q_set, K, *, n_iter: int = 12):
+    """Internal surface (used by ``fitting``): equilibrium ``q`` (n,) of one arm for set-point
+    ``q_set`` (n,) and stiffness ``K`` (n,), and the hand site position (3,) (``None`` when
+    ``site_id`` is ``None``); no diagnostics. Differentiable in ``q_set`` and ``K`` by the
+    implicit function theorem (forward and reverse mode). ``mx`` is ``CogArm.mjx_model``."""
+    q, hand, _, _ = _equilibrium_one(mx, site_id, q_set, K, int(n_iter), 0.0, diagnostics=False)
+    return q, hand
+
+
+def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
     """Equilibrium posture of the springy arm under gravity for set-points ``q_set`` (..., n).
 
     Solves ``K (θ − θ_set) + ∇V(θ) = 0`` (springs balance gravity, no velocity) by Newton's method
     from ``θ_set`` (``n_iter`` steps) with ``∇V`` and the exact ``∇²V`` in closed form from one MJX
     kinematics pass (autodiff through MJX kinematics would cost minutes of compile time);
     derivatives by the implicit function theorem (``jax.custom_jvp``, forward and reverse mode).
-    ``K`` (..., n) [Nm/rad], default the arm's. Leading axes broadcast. ``converged`` flags each item.
+    ``K`` (..., n) [Nm/rad], default the arm's. Leading axes broadcast. ``status`` per item;
+    converged when ``residual <= tol·(1 + max K)`` and the equilibrium is stable.
+    (Not :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium of a chain.)
     """
+    check_arm(arm)
     n = arm.n
     q_set = check_set_point("q_set", q_set, n)
     K = check_stiffness("K", arm.K if K is None else K, n)
-    batch = tuple(np.broadcast_shapes(q_set.shape[:-1], K.shape[:-1]))
+    n_iter = check_positive_int("n_iter", n_iter)
+    check_positive("tol", tol)
+    try:
+        batch = tuple(np.broadcast_shapes(q_set.shape[:-1], K.shape[:-1]))
+    except ValueError as e:
+        raise ValueError(f"leading (batch) axes of `q_set` {q_set.shape} and `K` {K.shape} do not broadcast") from e
     B = math.prod(batch)
     qs = jnp.broadcast_to(q_set, batch + (n,)).reshape(B, n)
     Ks = jnp.broadcast_to(K, batch + (n,)).reshape(B, n)
-    q, hand, res, ok = _equilibrium_batch(
-        arm.mjx_model, arm.layout.hand_site, qs, Ks, int(n_iter), float(tol)
+    Bp = batch_bucket(B)
+    q, hand, res, status = (
+        a[:B]
+        for a in _equilibrium_batch(
+            arm.mjx_model, arm.layout.hand_site, pad_rows(qs, Bp), pad_rows(Ks, Bp), n_iter, float(tol)
+        )
     )
     return ArmEquilibrium(
         q=q.reshape(batch + (n,)),
         hand=hand.reshape(batch + (3,)),
         residual=res.reshape(batch),
-        converged=ok.reshape(batch),
+        status=status.reshape(batch),
     )
+
+
+def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
+    """Deprecated alias of :func:`arm_equilibrium` (the name was easy to confuse with
+    :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium)."""
+    warnings.warn(
+        "pmpjax.equilibrium is deprecated; use pmpjax.arm_equilibrium (the springy arm under gravity)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return arm_equilibrium(arm, q_set, K, n_iter=n_iter, tol=tol)
 
 
 @functools.partial(jax.jit, static_argnames=("site_id", "n_iter", "tol"))
 def _equilibrium_batch(mx, site_id, q_set, K, n_iter, tol):
-    return jax.vmap(lambda a, b: _equilibrium_one(mx, site_id, a, b, n_iter, tol))(q_set, K)
+    q, hand, res, ok = jax.vmap(lambda a, b: _equilibrium_one(mx, site_id, a, b, n_iter, tol))(q_set, K)
+    small = res <= tol * (1.0 + jnp.max(jax.lax.stop_gradient(K), axis=-1))
+    finite = jnp.isfinite(res) & jnp.all(jnp.isfinite(q), axis=-1)
+    status = jnp.where(
+        ~finite,
+        Status.NONFINITE,
+        jnp.where(ok, Status.SUCCESSFUL, jnp.where(small, Status.NOT_MINIMUM, Status.MAX_STEPS)),
+    )
+    return q, hand, res, status.astype(jnp.int32)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -183,18 +250,29 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
     hand force by solving ``Jᵀ F = τ`` in least squares (the paper's ``J F = K (θ − θ_set)``,
     restoring sign), ``F = (J#)ᵀ τ`` with the Moore–Penrose ``J# = Jᵀ (J Jᵀ)⁻¹``.
     """
+    if not isinstance(chain, MjcfChain):
+        raise TypeError(f"`chain` must be a pmpjax.MjcfChain, got {type(chain).__name__}")
+    if not isinstance(gravity, bool):
+        raise TypeError(f"`gravity` must be a bool, got {type(gravity).__name__}")
     n = chain.n
     q = check_set_point("q", q, n)
     q_set = check_set_point("q_set", q_set, n)
     K = check_stiffness("K", K, n)
-    batch = tuple(np.broadcast_shapes(q.shape, q_set.shape, K.shape))
-    q = jnp.broadcast_to(q, batch)
-    tau = -jnp.broadcast_to(K, batch) * (q - jnp.broadcast_to(q_set, batch))
+    try:
+        batch = tuple(np.broadcast_shapes(q.shape, q_set.shape, K.shape))
+    except ValueError as e:
+        raise ValueError(f"leading axes of `q` {q.shape}, `q_set` {q_set.shape}, `K` {K.shape} do not broadcast") from e
+    flat = lambda a: jnp.broadcast_to(a, batch).reshape(-1, n)  # noqa: E731
+    return _force_field(chain, flat(q), flat(q_set), flat(K), gravity).reshape(batch[:-1] + (3,))
+
+
+@functools.partial(jax.jit, static_argnames=("gravity",))
+def _force_field(chain, q, q_set, K, gravity):
+    tau = -K * (q - q_set)
     if gravity:
-        grad_V = jax.vmap(lambda qq: gravity_gradient(chain.mjx_model, qq))
-        tau = tau - grad_V(q.reshape(-1, n)).reshape(batch)
+        tau = tau - jax.vmap(lambda qq: gravity_gradient(chain.mjx_model, qq))(q)
     J = chain.jacobian(q)
-    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
+    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (chain.n,)))  # (B, n, 3), unweighted
     return jnp.einsum("...nm,...n->...m", Jp, tau)
 
 
@@ -202,8 +280,9 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
 # Minimum-jerk set-point moves (paper Section 2.3, Figure 4)
 
 
-def _xi(s):
-    """Integral of the normalised minimum-jerk speed ``30 s⁴ − 60 s³ + 30 s²`` from 0 to ``s``."""
+def min_jerk_xi(s):
+    """Integral of the normalised minimum-jerk speed ``30 s⁴ − 60 s³ + 30 s²`` from 0 to ``s``
+    (clipped to [0, 1]): ``10 s³ − 15 s⁴ + 6 s⁵``, the fraction of a move done at phase ``s``."""
     s = jnp.clip(s, 0.0, 1.0)
     return s**3 * (10.0 + s * (-15.0 + 6.0 * s))
 
@@ -216,33 +295,70 @@ def _xi_dot(s):
 
 @pytree_dataclass
 class Moves:
-    """Set-point moves: start times ``t0`` (M,) [s], durations ``duration`` (M,) [s] and
-    displacements ``delta`` (M, n) [rad] (``θ_end − θ_start`` of each move)."""
+    """Set-point moves: start times ``t0`` (M,) [s], durations ``duration`` (M,) [s] (positive)
+    and displacements ``delta`` (M, n) [rad] (``θ_end − θ_start`` of each move)."""
 
     t0: jax.Array
     duration: jax.Array
     delta: jax.Array
 
+    def __post_init__(self):
+        delta = as_array("delta", self.delta, tail=(None, None))
+        if delta.ndim != 2:
+            raise ValueError(f"`delta` must be (M, n) displacements, got shape {delta.shape}")
+        M = delta.shape[0]
+        t0 = as_array("t0", self.t0, tail=(M,))
+        duration = as_array("duration", self.duration, tail=(M,))
+        if t0.ndim != 1 or duration.ndim != 1:
+            raise ValueError(f"`t0` and `duration` must be ({M},), got {t0.shape} and {duration.shape}")
+        check_positive("duration", duration)
+        for name, v in (("t0", t0), ("duration", duration), ("delta", delta)):
+            object.__setattr__(self, name, jnp.asarray(v, float))
+
 
 def moves_from_targets(start, targets, t0, duration) -> Moves:
     """Moves from ``start`` (n,) through ``targets`` (M, n) issued at times ``t0`` (M,) with
-    durations ``duration`` (M,) [s]: each new move goes from the previous *target* to the new
-    one (not from where the arm is), as on Cog."""
+    durations ``duration`` (M,) [s] (scalars broadcast): each new move goes from the previous
+    *target* to the new one (not from where the arm is), as on Cog."""
     start = jnp.asarray(as_array("start", start, tail=(None,)), float)
+    if start.ndim != 1:
+        raise ValueError(f"`start` must be one set-point (n,), got shape {start.shape}")
     n = start.shape[-1]
     targets = jnp.asarray(as_array("targets", targets, tail=(None, n)), float)
+    if targets.ndim != 2:
+        raise ValueError(f"`targets` must be (M, {n}), got shape {targets.shape}")
     M = targets.shape[-2]
-    t0 = jnp.broadcast_to(jnp.asarray(as_array("t0", t0), float), (M,))
-    duration = jnp.broadcast_to(jnp.asarray(as_array("duration", duration), float), (M,))
+    t0, duration = as_array("t0", t0), as_array("duration", duration)
+    for name, v in (("t0", t0), ("duration", duration)):
+        if np.shape(v) not in ((), (M,)):
+            raise ValueError(f"`{name}` must be a scalar or ({M},) (one per target), got shape {np.shape(v)}")
     check_positive("duration", duration)
     prev = jnp.concatenate([start[None], targets[:-1]], axis=0)
-    return Moves(t0=t0, duration=duration, delta=targets - prev)
+    return Moves(
+        t0=jnp.broadcast_to(jnp.asarray(t0, float), (M,)),
+        duration=jnp.broadcast_to(jnp.asarray(duration, float), (M,)),
+        delta=targets - prev,
+    )
+
+
+def _check_moves(moves):
+    if not isinstance(moves, Moves):
+        raise TypeError(f"`moves` must be pmpjax.Moves (e.g. from moves_from_targets), got {type(moves).__name__}")
+    check_positive("moves.duration", moves.duration)
+
+
+def _check_times(t):
+    t = as_array("t", t)
+    if t.ndim != 1:
+        raise ValueError(f"`t` must be a 1-D array of times (T,) [s], got shape {t.shape}")
+    return jnp.asarray(t, float)
 
 
 def move_velocity(moves: Moves, t):
     """Summed set-point velocity (T, n) [rad/s] at times ``t`` (T,) of all ``moves``:
     ``Σ_j Δ_j / d_j · (30 s⁴ − 60 s³ + 30 s²)``, ``s = (t − t0_j) / d_j``."""
-    t = jnp.asarray(t, float)
+    _check_moves(moves)
+    t = _check_times(t)
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]  # (T, M)
     return (_xi_dot(s) / moves.duration[None, :]) @ moves.delta
 
@@ -250,9 +366,14 @@ def move_velocity(moves: Moves, t):
 def summed_moves(moves: Moves, start, t):
     """Set-points ``θ_set`` (T, n) [rad] and velocities (T, n) of summed moves from ``start`` (n,)
     at times ``t`` (T,): the velocities are added and integrated exactly, so each move adds
-    ``Δ_j ξ(s_j)`` with ``ξ(s) = ∫₀ˢ 30 u²(1 − u)² du``; overlapping moves sum smoothly."""
-    check_positive("moves.duration", moves.duration)
+    ``Δ_j ξ(s_j)`` with ``ξ(s) = ∫₀ˢ 30 u²(1 − u)² du``; overlapping moves sum smoothly.
+    Differentiable in ``start``, ``moves.t0``, ``moves.duration``, ``moves.delta`` and ``t``."""
+    _check_moves(moves)
+    n = moves.delta.shape[-1]
+    start = as_array("start", start, tail=(n,))
+    if start.ndim != 1:
+        raise ValueError(f"`start` must be one set-point ({n},), got shape {start.shape}")
     start = jnp.asarray(start, float)
-    t = jnp.asarray(as_array("t", t, tail=(None,)), float)
+    t = _check_times(t)
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]
-    return start[None, :] + _xi(s) @ moves.delta, move_velocity(moves, t)
+    return start[None, :] + min_jerk_xi(s) @ moves.delta, move_velocity(moves, t)

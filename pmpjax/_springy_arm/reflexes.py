@@ -3,19 +3,27 @@
 Subsumption layers (higher ones suppress the lower):
 
 - **reach** (bottom): the target generator issues joint-space targets; each new target adds a
-  minimum-jerk move from the *previous target* to the new one (moves sum, Figure 4).
+  minimum-jerk move from the *previous target* to the new one. Overlapping moves sum (their
+  velocities add, Figure 4) whatever their issue times: each move takes a free slot (idle, or
+  finished); only when all ``slots`` are busy does the earliest-ending move hand its remainder
+  over to the new one (the set-point still ends at the new target).
 - **lead**: while the hand is held (input ``lead``), the joint torque is compared with a
   reference torque refreshed every ``lead_refresh`` s; where it deviates by more than
   ``lead_threshold`` the set-point is backed off (each joint independently) so the deviation is
   clipped at the threshold. Targets are suppressed; afterwards reaching resumes from the set-point.
-- **grasp**: palm touch → a move from the current target to the posture where the arm was
-  touched (superposition: it cancels the ongoing move smoothly; the arm then rests there up to
-  its gravity sag, as in Figure 8), targets suppressed until ``release``.
+- **grasp**: palm touch → the arm "quickly stops, and holds itself in the stopped position"
+  (Figure 8): the ongoing moves are dropped and the set-point jumps to the one that holds the
+  *touched* posture ``q_s`` against gravity, ``θ_hold = q_s + K⁻¹ ∇V(q_s)`` (so the arm rests
+  where it was touched, not a sag below it), minus a braking term ``grasp_damping ⊙ θ̇ / K``
+  while grasping (extra joint damping, so the arm stops without swinging back past the touched
+  posture). Targets are suppressed until ``release``; reaching then resumes from ``θ_hold``.
+  (Adding a move on top of the running reach instead, as before, swung a one-joint reach 0 → 1
+  touched at 0.4 s down to −0.29 rad: the two moves' velocity profiles do not cancel.)
 - **withdrawal** (top): back-of-hand touch → winner-take-all: ongoing moves are dropped and a fast
   move returns the set-point to the rest primitive; targets suppressed until ``release``.
 
 Everything is ``jnp.where`` on the state, so a batch of arms in different modes runs in lock-step.
-Set-points integrate the summed move velocities exactly over each step (``_primitives._xi``).
+Set-points integrate the summed move velocities exactly over each step (``primitives.min_jerk_xi``).
 """
 
 from __future__ import annotations
@@ -27,12 +35,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass, static_field
-from .._base.validate import as_array, check_positive
-from .arm import ArmTrajectory, CogArm, run_controller
-from .primitives import _xi
+from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
+from .arm import ArmTrajectory, CogArm, check_arm, run_controller
+from .primitives import min_jerk_xi
 
 REACH, GRASP, WITHDRAW, LEAD = 0, 1, 2, 3
-MODES = ("reach", "grasp", "withdraw", "lead")
+IDLE_T0 = -2.0  # start of an idle slot's (empty, duration 1 s) move: it ended before t = 0
 
 
 @pytree_dataclass
@@ -48,44 +56,79 @@ class ReflexInputs:
     release: jax.Array
     touch: jax.Array
 
+    def __post_init__(self):
+        target = as_array("target", self.target, tail=(None, None))
+        T = target.shape[-2]
+        for name in ("new_target", "lead", "release"):
+            object.__setattr__(self, name, jnp.asarray(as_array(name, getattr(self, name), tail=(T,)), float))
+        object.__setattr__(self, "touch", jnp.asarray(as_array("touch", self.touch, tail=(T, 2)), float))
+        object.__setattr__(self, "target", jnp.asarray(target, float))
+
 
 def script_inputs(arm: CogArm, duration: float, *, targets=(), lead=(), release=(), touch=(), q_start=None):
     """Build :class:`ReflexInputs` for ``duration`` [s] at the arm's ``dt``.
 
     ``targets``: sequence of ``(time, q_target (n,))``; ``lead``: ``(t_on, t_off)`` intervals;
-    ``release``: times; ``touch``: ``(t_on, t_off, palm_N, back_N)`` scripted touches.
+    ``release``: times; ``touch``: ``(t_on, t_off, palm_N, back_N)`` scripted touches;
+    ``q_start`` (n,) the target before the first one (default the arm's rest posture).
     """
+    check_arm(arm)
     check_positive("duration", duration)
     T = int(round(duration / arm.dt))
+    if T < 1:
+        raise ValueError(f"`duration` must be at least one step ({arm.dt} s), got {duration}")
     n = arm.n
     t = np.arange(T) * arm.dt
-    target = np.broadcast_to(np.asarray(arm.q_rest if q_start is None else q_start, float), (T, n)).copy()
+    start = np.asarray(as_array("q_start", arm.q_rest if q_start is None else q_start, tail=(n,)), float)
+    if start.shape != (n,):
+        raise ValueError(f"`q_start` must have shape ({n},), got {start.shape}")
+    target = np.broadcast_to(start, (T, n)).copy()
     new = np.zeros(T)
-    for tk, q in sorted(targets, key=lambda e: e[0]):
-        q = np.asarray(as_array("targets", q, tail=(n,)), float)
-        k = int(round(tk / arm.dt))
+
+    def entries(name, xs, width):
+        for e in xs:
+            if len(e) != width:
+                raise ValueError(f"`{name}` entries must have {width} items, got {e!r}")
+            yield e
+
+    def step_of(name, tk):
+        k = int(round(float(as_array(name, tk)) / arm.dt))
         if not 0 <= k < T:
-            raise ValueError(f"`targets` time {tk} s is outside [0, {duration}) s")
+            raise ValueError(f"`{name}` time {tk} s is outside [0, {duration}) s")
+        return k
+
+    for tk, q in sorted(entries("targets", targets, 2), key=lambda e: e[0]):
+        q = np.asarray(as_array("targets", q, tail=(n,)), float)
+        if q.shape != (n,):
+            raise ValueError(f"`targets` postures must have shape ({n},), got {q.shape}")
+        k = step_of("targets", tk)
         target[k:] = q
         new[k] = 1.0
     lead_a = np.zeros(T)
-    for t0, t1 in lead:
+    for t0, t1 in entries("lead", lead, 2):
+        if not t1 > t0:
+            raise ValueError(f"`lead` intervals must have t_off > t_on, got ({t0}, {t1})")
         lead_a[(t >= t0) & (t < t1)] = 1.0
     rel = np.zeros(T)
     for tk in release:
-        rel[min(T - 1, int(round(tk / arm.dt)))] = 1.0
+        rel[step_of("release", tk)] = 1.0
     touch_a = np.zeros((T, 2))
-    for t0, t1, palm, back in touch:
+    for t0, t1, palm, back in entries("touch", touch, 4):
+        if not t1 > t0:
+            raise ValueError(f"`touch` intervals must have t_off > t_on, got ({t0}, {t1})")
+        force = np.asarray(as_array("touch", [palm, back]))
+        if np.any(force < 0):
+            raise ValueError(f"`touch` forces must be non-negative [N], got {force}")
         sel = (t >= t0) & (t < t1)
-        touch_a[sel] = np.maximum(touch_a[sel], [palm, back])
+        touch_a[sel] = np.maximum(touch_a[sel], force)
     return ReflexInputs(*(jnp.asarray(a) for a in (target, new, lead_a, rel, touch_a)))
 
 
 @pytree_dataclass
 class ReflexState:
-    """Network state: commanded set-point ``q_set`` (n,), latest target ``target_end`` (n,),
-    move slots (``t0`` (S,), ``duration`` (S,), ``delta`` (S, n)), ``mode`` (int), lead
-    reference torque ``tau_ref`` (n,) and its refresh time ``t_ref``."""
+    """Network state: set-point ``q_set`` (n,) without the grasp's braking term, latest target
+    ``target_end`` (n,), move slots (``t0`` (S,), ``duration`` (S,), ``delta`` (S, n)), ``mode``
+    (int), lead reference torque ``tau_ref`` (n,) and its refresh time ``t_ref``."""
 
     q_set: jax.Array
     target_end: jax.Array
@@ -100,32 +143,39 @@ class ReflexState:
 @pytree_dataclass
 class ReflexNetwork:
     """Parameters of the reflex network (all times [s]): ``rest`` (n,) rest primitive [rad];
-    ``reach_duration``, ``grasp_duration``, ``withdraw_duration`` move durations;
-    ``touch_threshold`` [N]; ``lead_threshold`` (n,) or scalar [Nm]; ``lead_refresh`` [s];
-    ``dt`` (static) the control period = the arm's MuJoCo step; ``slots`` (static) concurrent moves.
+    ``reach_duration``, ``withdraw_duration`` move durations; ``touch_threshold`` [N];
+    ``lead_threshold`` (n,) or scalar [Nm]; ``lead_refresh`` [s]; ``grasp_damping`` (n,) or
+    scalar [Nm s/rad] extra joint damping while grasping (0 = none; :func:`reflex_network` uses
+    the arm's ``B``, doubling it); ``dt`` (static) the control period = the arm's MuJoCo step;
+    ``slots`` (static) concurrent moves. (The grasp no longer adds a timed move, so the former
+    ``grasp_duration`` is gone.)
     """
 
     rest: jax.Array
     reach_duration: float = 1.0
-    grasp_duration: float = 0.25
     withdraw_duration: float = 0.4
     touch_threshold: float = 0.5
     lead_threshold: jax.Array = 0.5
     lead_refresh: float = 5.0
+    grasp_damping: jax.Array = 0.0
     dt: float = static_field(default=0.002)
     slots: int = static_field(default=4)
 
     def __post_init__(self):
         for name in (
             "reach_duration",
-            "grasp_duration",
             "withdraw_duration",
             "touch_threshold",
             "lead_threshold",
             "lead_refresh",
             "dt",
         ):
+            as_array(name, getattr(self, name))
             check_positive(name, getattr(self, name))
+        gd = as_array("grasp_damping", self.grasp_damping)
+        if np.any(np.asarray(gd) < 0):
+            raise ValueError(f"`grasp_damping` must be non-negative, got {np.asarray(gd)}")
+        check_positive_int("slots", self.slots)
         object.__setattr__(self, "rest", jnp.asarray(as_array("rest", self.rest, tail=(None,)), float))
 
     def init(self, q_set0):
@@ -134,7 +184,8 @@ class ReflexNetwork:
         return ReflexState(
             q_set=q_set0,
             target_end=q_set0,
-            t0=jnp.zeros(S) + z,
+            # Idle slots hold empty moves that ended before t = 0, so any new move is "later".
+            t0=jnp.full(S, IDLE_T0) + z,
             duration=jnp.ones(S) + z,
             delta=jnp.zeros((S, n)) + z,
             mode=jnp.asarray(REACH),
@@ -154,22 +205,22 @@ class ReflexNetwork:
         end_lead = ~lead_on & (mode == LEAD)
         new_tg = (inp.new_target > 0.5) & (mode == REACH) & ~start_wd & ~start_gr & ~start_lead
 
-        q_set = s.q_set
+        # Grasp: hold the touched posture q_s against gravity, K (q_s − θ_hold) + ∇V(q_s) = 0.
+        q_hold = obs.q_sensed + obs.gravity / K
+        q_set = jnp.where(start_gr, q_hold, s.q_set)
         # Winner-take-all layers drop the ongoing moves and restart from the current set-point.
-        clear = start_wd | start_lead
+        clear = start_wd | start_lead | start_gr
         delta = jnp.where(clear, 0.0, s.delta)
         target_end = jnp.where(clear, q_set, s.target_end)
 
         # One new move per step at most (the events are exclusive).
-        add = start_wd | start_gr | new_tg
-        goal = jnp.where(start_wd, self.rest, jnp.where(start_gr, obs.q, inp.target))
-        dur = jnp.where(
-            start_wd, self.withdraw_duration, jnp.where(start_gr, self.grasp_duration, self.reach_duration)
-        )
+        add = start_wd | new_tg
+        goal = jnp.where(start_wd, self.rest, inp.target)
+        dur = jnp.where(start_wd, self.withdraw_duration, self.reach_duration)
         end = s.t0 + s.duration
-        k = jnp.argmin(end)
-        # A still-running move in the reused slot hands its remainder to the new move.
-        remainder = delta[k] * (1.0 - _xi((t - s.t0[k]) / s.duration[k]))
+        k = jnp.argmin(end)  # a free (idle or finished) slot if there is one: those end <= t
+        # Only when every slot is busy: the earliest-ending move hands its remainder to the new one.
+        remainder = delta[k] * (1.0 - min_jerk_xi((t - s.t0[k]) / s.duration[k]))
         new_delta = goal - target_end + remainder
         delta = jnp.where(add, delta.at[k].set(new_delta), delta)
         t0 = jnp.where(add, s.t0.at[k].set(t), s.t0)
@@ -191,8 +242,10 @@ class ReflexNetwork:
             WITHDRAW,
             jnp.where(start_gr, GRASP, jnp.where(start_lead, LEAD, jnp.where(end_lead, REACH, mode))),
         )
+        # While grasping, extra damping through the set-point brakes the arm and keeps it still.
+        command = jnp.where(mode == GRASP, q_set - self.grasp_damping * obs.qdot / K, q_set)
         # Exact integral of the summed minimum-jerk velocities over [t, t + dt].
-        inc = (_xi((t + self.dt - t0) / duration) - _xi((t - t0) / duration)) @ delta
+        inc = (min_jerk_xi((t + self.dt - t0) / duration) - min_jerk_xi((t - t0) / duration)) @ delta
         state = ReflexState(
             q_set=q_set + inc,
             target_end=target_end,
@@ -203,12 +256,17 @@ class ReflexNetwork:
             tau_ref=tau_ref,
             t_ref=t_ref,
         )
-        return state, q_set, {"mode": mode, "tau_ref": tau_ref}
+        return state, command, {"mode": mode, "tau_ref": tau_ref}
 
 
 def reflex_network(arm: CogArm, **params) -> ReflexNetwork:
-    """A :class:`ReflexNetwork` for ``arm`` (rest primitive and ``dt`` from the arm)."""
+    """A :class:`ReflexNetwork` for ``arm``: rest primitive, ``grasp_damping`` (= the arm's
+    joint damping ``B``, doubling it while grasping) and ``dt`` from the arm; ``params`` override."""
+    check_arm(arm)
+    if "dt" in params:
+        raise ValueError("`dt` comes from the arm (its MuJoCo timestep); do not pass it")
     params.setdefault("rest", arm.q_rest)
+    params.setdefault("grasp_damping", arm.B)
     return ReflexNetwork(dt=arm.dt, **params)
 
 
@@ -222,34 +280,49 @@ def run_reflexes(
     K=None,
     B=None,
     q0=None,
+    backend: str = "mjx",
 ) -> ArmTrajectory:
-    """Closed-loop rollout of the reflex network on the MJX arm.
+    """Closed-loop rollout of the reflex network on the arm.
 
     ``inputs`` (:class:`ReflexInputs`, leaves (…, T, ·)) drive the target generator and the
     scripted sensors; ``probe`` (…, T, 3) moves the contact probe (touch from MuJoCo contacts);
-    ``force`` (…, T, 3) [N] pushes the hand (for lead). Returns an :class:`ArmTrajectory` whose
+    ``force`` (…, T, 3) [N] pushes the hand (for lead). ``backend``: ``"mjx"`` or ``"mujoco"``
+    (C MuJoCo, see :func:`pmpjax.run_controller`). Returns an :class:`ArmTrajectory` whose
     ``log`` holds ``mode`` (…, T) and ``tau_ref`` (…, T, n).
     """
+    check_arm(arm)
     if not isinstance(network, ReflexNetwork):
         raise TypeError(f"`network` must be a ReflexNetwork, got {type(network).__name__}")
+    if not isinstance(inputs, ReflexInputs):
+        raise TypeError(f"`inputs` must be ReflexInputs (pmpjax.script_inputs), got {type(inputs).__name__}")
     if not math.isclose(network.dt, arm.dt):
         raise ValueError(f"`network.dt`={network.dt} must equal the arm's timestep {arm.dt}")
     n = arm.n
     if network.rest.shape != (n,):
         raise ValueError(f"`network.rest` must have shape ({n},), got {network.rest.shape}")
+    for name in ("lead_threshold", "grasp_damping"):
+        if np.ndim(getattr(network, name)) > 0 and np.shape(getattr(network, name)) != (n,):
+            raise ValueError(f"`network.{name}` must be a scalar or ({n},), got {np.shape(getattr(network, name))}")
     target = as_array("inputs.target", inputs.target, tail=(None, n))
     T = target.shape[-2]
     batch = tuple(target.shape[:-2])
     for name in ("new_target", "lead", "release"):
         as_array(f"inputs.{name}", getattr(inputs, name), tail=(T,))
     as_array("inputs.touch", inputs.touch, tail=(T, 2))
-    inputs = ReflexInputs(
-        target=jnp.asarray(target, float),
-        new_target=jnp.broadcast_to(jnp.asarray(inputs.new_target, float), batch + (T,)),
-        lead=jnp.broadcast_to(jnp.asarray(inputs.lead, float), batch + (T,)),
-        release=jnp.broadcast_to(jnp.asarray(inputs.release, float), batch + (T,)),
-        touch=jnp.broadcast_to(jnp.asarray(inputs.touch, float), batch + (T, 2)),
-    )
+    try:
+        inputs = ReflexInputs(
+            target=jnp.asarray(target, float),
+            new_target=jnp.broadcast_to(jnp.asarray(inputs.new_target, float), batch + (T,)),
+            lead=jnp.broadcast_to(jnp.asarray(inputs.lead, float), batch + (T,)),
+            release=jnp.broadcast_to(jnp.asarray(inputs.release, float), batch + (T,)),
+            touch=jnp.broadcast_to(jnp.asarray(inputs.touch, float), batch + (T, 2)),
+        )
+    except ValueError as e:
+        raise ValueError(f"`inputs` leading (batch) axes must match `inputs.target`'s {batch}: {e}") from e
+    # The grasp's braking adds to the joint damping: keep the explicit step stable.
+    B_total = (arm.B if B is None else B) + network.grasp_damping
+    if is_concrete(B_total) and np.max(arm.dt * np.asarray(B_total) / arm.inertia_diag) > 1.0:
+        raise ValueError("`network.grasp_damping` + `B` is too large for the explicit damping step (dt·B/M > 1)")
     q0 = arm.q_rest if q0 is None else q0
     return run_controller(
         arm,
@@ -263,9 +336,16 @@ def run_reflexes(
         probe=probe,
         force=force,
         batch_shape=batch,
+        backend=backend,
     )
 
 
 def stack_inputs(inputs) -> ReflexInputs:
     """Stack a list of :class:`ReflexInputs` (same T) along a new leading batch axis."""
+    inputs = list(inputs)
+    if not inputs or not all(isinstance(i, ReflexInputs) for i in inputs):
+        raise TypeError("`inputs` must be a non-empty sequence of ReflexInputs")
+    shapes = {tuple(np.shape(i.target)) for i in inputs}
+    if len(shapes) != 1:
+        raise ValueError(f"`inputs` must all have the same shape (same T and n), got {sorted(shapes)}")
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *inputs)
