@@ -210,6 +210,7 @@ def main():
         f"\n{'subjects':>8} {'compile [s]':>11} {'run [s]':>9} {'ms/subject':>11} {'subjects/s':>11} "
         f"{'x SciPy':>8} {'converged':>9}"
     )
+    fit = None
     for S in args.sizes:
         tc, tr, fit = jax_fit(rec, S, CHUNK)
         rate = S / tr
@@ -234,7 +235,48 @@ def main():
         f"\nSciPy loop: {results['scipy']['seconds_per_subject']:.1f} s/subject over "
         f"{results['scipy']['subjects']} subjects ({sp_rate:.4f} subjects/s)"
     )
+    results["floor"] = floor(rec, fit)
+    dump()
     print(f"wrote {args.out}")
+
+
+def floor(rec, fit):
+    """The cost of the equilibria the fit needs: one LM iteration evaluates, per start, 500
+    equilibria and their 8-tangent implicit Jacobian (``jacfwd`` of the residual). Timed for a
+    chunk (CHUNK subjects × N_STARTS starts), times the LM steps: ``ideal`` uses each start's own
+    step count (no vmap lane waiting), ``chunked`` the chunk's slowest start (what a vmapped
+    while_loop pays)."""
+    from fitting._donders import _residual_fn
+
+    resid = _residual_fn(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
+    lin = jax.jit(jax.vmap(jax.vmap(jax.jacfwd(resid), in_axes=(0, None)), in_axes=(0, 0)))
+    S = CHUNK
+    x, q = rec.pointing[:S], rec.joint_angles[:S]
+    Np = 1 << (N_POST - 1).bit_length()
+    w = np.ones(x.shape[:2])
+    x, q, w = (np.concatenate([a, np.zeros((S, Np - N_POST) + a.shape[2:])], 1) for a in (x, q, w))
+    th = _starts(rec.joint_angles[:S].mean(1), 5, 3, N_STARTS, 0)
+    args = (th, (x, q, w))
+    jax.block_until_ready(lin(*args))
+    t_eval = min(_timeit(lambda: jax.block_until_ready(lin(*args))) for _ in range(3))
+    steps = np.asarray(fit.start_steps, float)  # (subjects, starts)
+    per_lane = t_eval / (S * N_STARTS)
+    n_chunks = int(np.ceil(len(steps) / S))
+    chunk_max = np.array([steps[i * S:(i + 1) * S].max() for i in range(n_chunks)])
+    ideal = per_lane * (steps + 1).sum(1).mean()
+    chunked = t_eval * (chunk_max + 1).sum() / len(steps)
+    out = dict(eval_s_per_chunk=t_eval, ms_per_subject_ideal=1e3 * ideal, ms_per_subject_chunked=1e3 * chunked,
+               mean_steps=float(steps.mean()), mean_chunk_max_steps=float(chunk_max.mean()))
+    print(f"floor: one residual+Jacobian pass of a chunk ({S}x{N_STARTS} starts) {t_eval:.3f} s; "
+          f"equilibria cost {1e3 * ideal:.1f} ms/subject at each start's own steps (mean {steps.mean():.1f}), "
+          f"{1e3 * chunked:.1f} ms/subject at the chunk's slowest start (mean {chunk_max.mean():.1f})")
+    return out
+
+
+def _timeit(f):
+    t = time.perf_counter()
+    f()
+    return time.perf_counter() - t
 
 
 if __name__ == "__main__":

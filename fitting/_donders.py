@@ -138,7 +138,8 @@ def coefficient_names(chain: Chain) -> tuple[str, ...]:
 
 def parameter_names(chain: Chain) -> tuple[str, ...]:
     """Names of the fitted parameters: log-stiffness entries ``logK[i,j]`` then ``q_rest[i]``."""
-    n, lab = chain.n, _labels(chain)
+    lab = _labels(chain)
+    n = chain.n
     return tuple(f"logK[{lab[i]},{lab[j]}]" for i, j in _sym_index(n)) + tuple(f"q_rest[{v}]" for v in lab)
 
 
@@ -248,6 +249,7 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
         best = jnp.argmin(jnp.where(finite, res.cost, jnp.inf))
         r = jax.tree_util.tree_map(lambda a: a[best], res)
         n_valid = jnp.sum(w > 0) * (1 if kind == "torsion" else n)
+        nv = n_valid.astype(r.cost.dtype)  # float counts: no implicit int→float promotion
         N = r.residual.shape[0]
         cov, se, _, _ = covariance(r, rcond=1e-12)
         # the same in the coefficients c of Donders' law (module docstring): ∂r/∂c = ∂r/∂θ (∂c/∂θ)⁻¹
@@ -255,9 +257,9 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
         r_c = replace(r, jac=jnp.linalg.solve(dc.T, r.jac.T).T)
         cov_c, se_c, s, Vt = covariance(r_c, rcond=1e-12)
         # `covariance` divides by N − p; masked samples are not data: rescale to n_valid − p.
-        fix = (N - p) / jnp.maximum(n_valid - p, 1)
+        fix = (N - p) / jnp.maximum(nv - p, 1.0)
         cov, se, cov_c, se_c = cov * fix, se * jnp.sqrt(fix), cov_c * fix, se_c * jnp.sqrt(fix)
-        sigma = jnp.sqrt(2.0 * r.cost / jnp.maximum(n_valid - p, 1))
+        sigma = jnp.sqrt(2.0 * r.cost / jnp.maximum(nv - p, 1.0))
         dse = sigma / jnp.where(s > 0, s, jnp.inf)
         ident = s > rcond * s[0]
         dK = jax.jacfwd(lambda t: stiffness_from_params(t, n, trace))(r.x[:n_k])  # (n, n, n_k)
@@ -269,7 +271,7 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
             x=r.x,
             KJ=stiffness_from_params(r.x[:n_k], n, trace),
             cost=r.cost,
-            rms=jnp.sqrt(2.0 * r.cost / jnp.maximum(n_valid, 1)),
+            rms=jnp.sqrt(2.0 * r.cost / jnp.maximum(nv, 1.0)),
             steps=r.steps,
             status=status,
             n=n_valid,

@@ -95,16 +95,16 @@ def fit_donders_surface(r, mask=None) -> DondersSurface:
     r = as_array("r", r, tail=(None, 3))
     r = jnp.asarray(r, jnp.result_type(float))
     if mask is None:
-        w = jnp.ones(r.shape[:-1], r.dtype)
+        w = np.ones(r.shape[:-1], r.dtype)  # concrete even under jit (the sample count check below)
     else:
         mask = np.asarray(mask)
         if mask.shape != tuple(r.shape[:-1]):
             raise ValueError(f"`mask` must have shape {tuple(r.shape[:-1])}, got {mask.shape}")
-        w = jnp.asarray(mask, r.dtype)
-    n = np.asarray(jnp.sum(w, axis=-1))
+        w = mask.astype(r.dtype)
+    n = np.sum(w, axis=-1)
     if np.any(n < 7):
         raise ValueError(f"`r` needs at least 7 (unmasked) samples per surface, got {int(n.min())}")
-    return _fit(r, w)
+    return _fit(r, jnp.asarray(w))
 
 
 def screen_grid(n: int = 9, *, half_angle_deg: float = SCREEN_HALF_ANGLE_DEG, d: float = 1.0):

@@ -68,7 +68,8 @@ class DondersRecording:
     @property
     def joint_angles(self) -> np.ndarray:
         """Wrist joint angles (S, N, 3) [rad] (branch |q_FE| < π/2); masked samples are 0."""
-        q = np.asarray(joint_angles_from_quat(self.quat))
+        quat = np.where(self.mask[..., None], self.quat, [1.0, 0.0, 0.0, 0.0])  # padding: identity
+        q = np.asarray(joint_angles_from_quat(quat))
         return np.where(self.mask[..., None], q, 0.0)
 
     @property
