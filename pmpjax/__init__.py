@@ -12,12 +12,12 @@ from ._chains.kinematics import Wrist as Wrist
 from ._chains.kinematics import manipulability as manipulability
 from ._chains.mjcf import MjcfChain as MjcfChain
 from ._chains.shoulder_elbow import Arm4 as Arm4
-from ._data.matlab import HugmpSubject as HugmpSubject
-from ._data.matlab import hugmp_arrays as hugmp_arrays
+from ._data.hugmp import HugmpSubject as HugmpSubject
+from ._data.hugmp import hugmp_arrays as hugmp_arrays
+from ._data.hugmp import load_hugmp as load_hugmp
+from ._data.hugmp import motion_kinematics as motion_kinematics
 from ._data.matlab import ik_dataset_arrays as ik_dataset_arrays
-from ._data.matlab import load_hugmp as load_hugmp
 from ._data.matlab import load_ik_dataset as load_ik_dataset
-from ._data.matlab import motion_kinematics as motion_kinematics
 from ._data.matlab import read_mat as read_mat
 from ._data.matlab import write_ik_dataset as write_ik_dataset
 from ._data.matlab import write_mat as write_mat

@@ -132,3 +132,90 @@ def slsqp_equilibrium(fk, jac, KJ, q_rest, x, q0=None):
         if r.success:
             return r.x
     raise AssertionError(r.message)
+
+
+# ---------------------------------------------------------------------------------------------
+# IK weights (Khoramshahi et al. 2022), written from the paper with np.linalg and SciPy only
+
+
+def weighted_pinv(J, w):
+    """``J#_W = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` (..., n, m) for ``J`` (..., m, n), diagonal weights ``w`` (n,)."""
+    JA = J / np.asarray(w)[..., None, :]  # J W⁻¹
+    return np.swapaxes(JA, -1, -2) @ np.linalg.inv(JA @ np.swapaxes(J, -1, -2))
+
+
+def ik_fig1_numpy(rng, *, n_reps=100, K=500, w=(1.0, 0.8, 0.6, 0.4, 0.2), m=3, sigma=0.2):
+    """Fig 1 data (Section 4.1): J, ẋ ~ N(0, 1), ṽ ~ N(0, σ²), q̇ = J#_W ẋ + (I − J#_W J) ṽ (Eq 15)."""
+    n = len(w)
+    J = rng.standard_normal((n_reps, K, m, n))
+    xdot = rng.standard_normal((n_reps, K, m))
+    v = sigma * rng.standard_normal((n_reps, K, n))
+    Jp = weighted_pinv(J, w)
+    qdot = np.einsum("rkij,rkj->rki", Jp, xdot) + v - np.einsum("rkij,rkj->rki", Jp @ J, v)
+    return qdot, xdot, J
+
+
+def ik_fig3_numpy(*, w=(1.0, 0.01), k_task=1.0, k_null=1.0, dt=0.1, duration=6.0, q0=(0.5, 0.5)):
+    """Fig 3: two prismatic joints, x = q1 + q2, goal 1 → 1.5 (t = 2 s) → 0.5 (t = 3 s), explicit
+    Euler of q̇ = J#_W k_task (x_g − x) + (I − J#_W J)(−k_null q1, 0)."""
+    J = np.array([[1.0, 1.0]])
+    Jp = weighted_pinv(J, w)
+    N = np.eye(2) - Jp @ J
+    q = np.array(q0, dtype=float)
+    out = []
+    for k in range(int(round(duration / dt))):
+        t = k * dt
+        goal = 1.0 if t < 2.0 else 1.5 if t < 3.0 else 0.5
+        qd = Jp @ [k_task * (goal - q.sum())] + N @ [-k_null * q[0], 0.0]
+        out.append(qd)
+        q = q + dt * qd
+    qdot = np.array(out)
+    return qdot, qdot @ J.T, np.broadcast_to(J, (len(out), 1, 2)).copy()
+
+
+def algorithm1(qdot, xdot, J, gamma, iters, *, w_min=1e-3, gamma_rate=0.0, fixed=()):
+    """Algorithm 1 for one subject, ``iters`` updates. ``qdot`` (K, n), ``xdot`` (K, m), ``J`` (K, m, n).
+
+    Lines 1–21 of the paper: evaluation with the previous null-space estimate V̄, ū = Jᵀ B ẋ,
+    v̄ = γ (I − J# J) q̇, Ψ = (Q̇ − V̄) Q̇ᵀ, Ω = Ū Q̇ᵀ, the QP of Eq 24 on Ψ̃ (n², n), Ω̃ (n²,) solved
+    by ``scipy.optimize.lsq_linear`` with bounds [w_min, 1], fixed joints set back to 1, w / max w.
+    Returns the weights after each update (iters, n), the errors e (iters,) and the QP solutions
+    before normalisation (iters, n).
+    """
+    import scipy.optimize
+
+    K, n = qdot.shape
+    w, V, g = np.ones(n), np.zeros((K, n)), float(gamma)
+    free = np.array([i not in fixed for i in range(n)])
+    ws, errs, raw = [], [], []
+    for _ in range(iters):
+        Winv = np.diag(1.0 / w)
+        B = np.linalg.inv(J @ Winv @ np.swapaxes(J, 1, 2))  # (K, m, m)
+        Jp = Winv @ np.swapaxes(J, 1, 2) @ B  # (K, n, m)
+        qbar = np.einsum("kij,kj->ki", Jp, xdot) + V
+        errs.append(np.mean(np.linalg.norm(qdot - qbar, axis=1)))
+        U = np.einsum("kji,kjl,kl->ki", J, B, xdot)  # ū = Jᵀ B ẋ
+        V = g * (qdot - np.einsum("kij,kj->ki", Jp @ J, qdot))
+        Psi = (qdot - V).T @ qdot
+        Omega = U.T @ qdot
+        Psi_t = np.concatenate([np.diag(Psi[:, j]) for j in range(n)])
+        Omega_t = np.concatenate([Omega[:, j] for j in range(n)])
+        w = scipy.optimize.lsq_linear(Psi_t, Omega_t, bounds=(w_min, 1.0), method="bvls", tol=1e-15).x
+        raw.append(w.copy())
+        w[~free] = 1.0
+        w[free] = w[free] / w[free].max()
+        ws.append(w.copy())
+        g = g + gamma_rate * (1.0 - g)
+    return np.array(ws), np.array(errs), np.array(raw)
+
+
+def arm4_fk(q, L1=0.30, L2=0.33):
+    """HuG-MP README: p(q) = Rx(q1) Ry(q2) Rz(−q3) ([0, 0, −L1] + Ry(−q4) [0, 0, −L2])."""
+    q = np.asarray(q)
+    return rx(q[0]) @ ry(q[1]) @ rz(-q[2]) @ (np.array([0, 0, -L1]) + ry(-q[3]) @ np.array([0, 0, -L2]))
+
+
+def arm4_jac(q, L1=0.30, L2=0.33):
+    """Jacobian of :func:`arm4_fk` by complex steps (exact to rounding)."""
+    h = 1e-30
+    return np.stack([arm4_fk(np.asarray(q, complex) + 1j * h * e, L1, L2).imag / h for e in np.eye(4)], axis=1)

@@ -11,8 +11,9 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.validate import as_array
+from pmpjax._base.validate import as_array, check_positive, check_positive_int
 
+from .examples import _check_key
 from .weights import estimate_ik_weights
 
 
@@ -27,6 +28,14 @@ def ik_decomposition(qdot, xdot, J, w):
     xdot = as_array("xdot", xdot, tail=(None, None))
     J = as_array("J", J, tail=(None, xdot.shape[-1], n))
     w = as_array("w", w, tail=(n,))
+    check_positive("w", w)
+    if not (tuple(xdot.shape[:-1]) == tuple(J.shape[:-2]) == tuple(qdot.shape[:-1])):
+        raise ValueError(f"`qdot` (..., K, n), `xdot` (..., K, m) and `J` (..., K, m, n) must share the axes (..., K); "
+                         f"got {tuple(qdot.shape)}, {tuple(xdot.shape)}, {tuple(J.shape)}")
+    batch = tuple(qdot.shape[:-2])
+    if tuple(w.shape[:-1]) != batch[len(batch) - (w.ndim - 1):] or w.ndim - 1 > len(batch):
+        raise ValueError(f"`w` (..., n) must have the data's batch axes {batch} (or trailing ones), "
+                         f"got {tuple(w.shape)}")
     return _decompose(jnp.asarray(qdot), jnp.asarray(xdot), jnp.asarray(J), jnp.asarray(w))
 
 
@@ -38,7 +47,10 @@ def _decompose(qdot, xdot, J, w):
 
 
 def contribution_coefficients(w):
-    """Contribution coefficients ``β_i = w_i⁻¹ / Σ_k w_k⁻¹`` (..., n) (Eq 26); they sum to one."""
+    """Contribution coefficients ``β_i = w_i⁻¹ / Σ_k w_k⁻¹`` (..., n) (Eq 26) of positive weights
+    ``w`` (..., n); they sum to one. Differentiable."""
+    w = as_array("w", w, tail=(None,))
+    check_positive("w", w)
     inv = 1.0 / jnp.asarray(w)
     return inv / jnp.sum(inv, axis=-1, keepdims=True)
 
@@ -52,9 +64,23 @@ def overspecified_joints(J, *, mask=None, rtol: float = 1e-6, fraction: float = 
     (``estimate_ik_weights(..., fixed=...)``). ``J`` (..., K, m, n); returns bool (n,).
     """
     J = np.asarray(as_array("J", J, tail=(None, None)), dtype=float)
+    if J.ndim < 2:
+        raise ValueError(f"`J` must be (..., m, n) Jacobians, got shape {J.shape}")
     m, n = J.shape[-2:]
+    if not 0 < float(rtol) < 1:
+        raise ValueError(f"`rtol` must lie in (0, 1), got {rtol}")
+    if not 0 < float(fraction) <= 1:
+        raise ValueError(f"`fraction` must lie in (0, 1], got {fraction}")
     Jf = J.reshape(-1, m, n)
-    valid = np.ones(Jf.shape[0], bool) if mask is None else np.asarray(mask, bool).reshape(-1)
+    if mask is None:
+        valid = np.ones(Jf.shape[0], bool)
+    else:
+        mask = np.asarray(mask)
+        if mask.shape != J.shape[:-2] or mask.dtype != bool:
+            raise ValueError(f"`mask` must be a boolean array of shape {J.shape[:-2]}, got {mask.dtype} {mask.shape}")
+        valid = mask.reshape(-1)
+    if not valid.any():
+        raise ValueError("`mask` leaves no valid sample")
     Jf = Jf[valid]
     out = np.zeros(n, bool)
     scale = np.linalg.norm(Jf, axis=(-2, -1)) + 1e-300
@@ -67,14 +93,37 @@ def overspecified_joints(J, *, mask=None, rtol: float = 1e-6, fraction: float = 
 
 @pytree_dataclass
 class BootstrapResult:
-    """``w`` (..., n) estimate on all trials; ``lo``/``hi`` (..., n) percentile interval;
-    ``samples`` (B, ..., n) bootstrap replicates; ``converged`` (B, ...) per replicate."""
+    """``w`` (..., n) estimate on all trials with ``w_status`` (...,) its ``pj.Status``;
+    ``lo``/``hi`` (..., n) percentile interval; ``samples`` (B, ..., n) bootstrap replicates with
+    their ``status`` (B, ...) and ``converged`` (B, ...) (``status == SUCCESSFUL``)."""
 
     w: jax.Array
     lo: jax.Array
     hi: jax.Array
     samples: jax.Array
     converged: jax.Array
+    status: jax.Array
+    w_status: jax.Array
+
+
+def _item_generators(key, batch):
+    """One NumPy generator per item (flat order): ``key`` one JAX key per item (batch + key
+    shape) -> each item's own stream; one key for a batch -> item i gets the i-th spawned stream
+    of the key; one key for an unbatched call -> the key's own stream."""
+    key = jax.random.PRNGKey(0) if key is None else key
+    typed = jnp.issubdtype(getattr(key, "dtype", np.float64), jax.dtypes.prng_key)
+    data = np.asarray(jax.random.key_data(key) if typed else key)
+    per_item = data.shape[:-1] == batch and data.ndim > 1 and data.shape[-1] == 2
+    if per_item:
+        if data.dtype != np.uint32:
+            raise TypeError(f"`key` must be JAX PRNG key(s), got dtype {data.dtype}")
+        return [np.random.default_rng(np.random.SeedSequence([int(v) for v in k])) for k in data.reshape(-1, 2)]
+    _check_key(key)
+    entropy = [int(v) for v in data.reshape(-1)]
+    if not batch:
+        return [np.random.default_rng(np.random.SeedSequence(entropy))]
+    B = int(np.prod(batch))
+    return [np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(i,))) for i in range(B)]
 
 
 def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=None,
@@ -82,56 +131,67 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
     ``qdot`` (..., T, S, n), ``xdot`` (..., T, S, m), ``J`` (..., T, S, m, n), ``mask`` (..., T, S)
-    (a trial with no valid sample is never drawn); ``key`` (a JAX PRNG key, default
-    ``PRNGKey(0)``) seeds the NumPy generator that draws the trials. The estimate on the data and
-    all ``n_boot`` replicates of every item run in one vectorised :func:`estimate_ik_weights` call
-    (``options`` are passed on; items with unusable data are flagged, giving NaN, not raising).
+    (a trial with no valid sample is never drawn; each replicate draws as many trials as the item
+    has valid ones); ``key`` a JAX PRNG key (default ``PRNGKey(0)``) or one key per item (shape
+    (...,) + key shape). An item's replicates depend only on its own data and key: with one key
+    per item, a batch gives what its items give one by one with their keys; with one key for a
+    batch, item i (flat order) draws from the i-th stream spawned from the key
+    (``numpy.random.SeedSequence``). The estimate on the data and all ``n_boot`` replicates of
+    every item run in one vectorised :func:`estimate_ik_weights` call (``options`` are passed on;
+    items with unusable data are flagged, giving NaN, not raising). ``lo``/``hi`` are the
+    ``(1 ± level)/2`` percentiles of the replicates.
     """
     qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
     xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
     J = as_array("J", J, tail=(None, None, None, None), finite=False)
-    if not 0 < level < 1:
+    if not 0 < float(level) < 1:
         raise ValueError(f"`level` must lie in (0, 1), got {level}")
-    if int(n_boot) != n_boot or n_boot < 2:
+    n_boot = check_positive_int("n_boot", n_boot)
+    if n_boot < 2:
         raise ValueError(f"`n_boot` must be an integer >= 2, got {n_boot}")
-    key = jax.random.PRNGKey(0) if key is None else key
     *batch, T, S, n = qdot.shape
     batch = tuple(batch)
-    mask = np.ones(tuple(batch) + (T, S), bool) if mask is None else np.asarray(mask, bool)
-    if mask.shape != batch + (T, S):
-        raise ValueError(f"`mask` must have shape {batch + (T, S)}, got {mask.shape}")
+    if tuple(xdot.shape[:-1]) != batch + (T, S) or tuple(J.shape[:-2]) != batch + (T, S):
+        raise ValueError(f"`qdot` (..., T, S, n), `xdot` (..., T, S, m) and `J` (..., T, S, m, n) must share the axes "
+                         f"(..., T, S); got {tuple(qdot.shape)}, {tuple(xdot.shape)}, {tuple(J.shape)}")
+    if "on_invalid" in options:
+        raise TypeError("`on_invalid` is not an option of bootstrap_ik_weights (unusable items are always flagged)")
+    mask = np.ones(batch + (T, S), bool) if mask is None else np.asarray(mask)
+    if mask.shape != batch + (T, S) or mask.dtype != bool:
+        raise ValueError(f"`mask` must be a boolean array of shape {batch + (T, S)}, got {mask.dtype} {mask.shape}")
+    gens = _item_generators(key, batch)
     trial_ok = mask.any(-1)  # (..., T)
     n_ok = trial_ok.sum(-1)[..., None]  # (..., 1)
     # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest
-    Tb = int(n_ok.max())
+    Tb = max(int(n_ok.max()), 1)
     # replicate 0 is the data itself (valid trials first), so one compiled call does everything
     order = np.argsort(~trial_ok, axis=-1, kind="stable")  # (..., T) valid trials first
-    # draws uniform among an item's valid trials, in NumPy seeded by `key` (a JAX categorical
-    # draw compiles for seconds per shape)
-    kd = np.asarray(key if np.asarray(key).dtype == np.uint32 else jax.random.key_data(key))
-    rng = np.random.default_rng([int(v) for v in kd.ravel()])
-    pick = np.floor(rng.random((n_boot,) + batch + (Tb,)) * np.maximum(n_ok, 1)).astype(int)
+    # per item: (n_boot, T) uniforms from its own stream, of which the first n_ok columns are used
+    # (so an item's draws do not depend on the other items of the batch)
+    u = np.stack([g.random((n_boot, T)) for g in gens], axis=1).reshape((n_boot,) + batch + (T,))
+    pick = np.floor(u[..., :Tb] * np.maximum(n_ok, 1)).astype(int)
     boot = np.take_along_axis(np.broadcast_to(order, (n_boot,) + order.shape), pick, axis=-1)
     idx = np.concatenate([order[None, ..., :Tb], boot], axis=0)
-    n_boot = n_boot + 1
+    n_rep = n_boot + 1
 
     def take(a):
         a = np.asarray(a)
         rest = a.shape[len(batch) + 2:]
         ix = idx.reshape(idx.shape + (1,) * (1 + len(rest)))
         g = np.take_along_axis(a[None], ix, axis=len(batch) + 1)
-        return g.reshape((n_boot,) + batch + (Tb * S,) + rest)
+        return g.reshape((n_rep,) + batch + (Tb * S,) + rest)
 
     used = np.arange(Tb) < n_ok  # (..., Tb)
-    mk = take(mask).reshape((n_boot,) + batch + (Tb, S)) & used[..., None]
-    opts = {k: v for k, v in options.items() if k != "on_invalid"}
+    mk = take(mask).reshape((n_rep,) + batch + (Tb, S)) & used[..., None]
     res = estimate_ik_weights(take(qdot), take(xdot), take(J), on_invalid="flag",
-                              mask=mk.reshape((n_boot,) + batch + (Tb * S,)), **opts)
-    a = (1.0 - level) / 2.0
+                              mask=mk.reshape((n_rep,) + batch + (Tb * S,)), **options)
+    a = (1.0 - float(level)) / 2.0
     ws = np.asarray(res.w[1:])
-    lo = jnp.asarray(np.nanquantile(ws, a, axis=0))
-    hi = jnp.asarray(np.nanquantile(ws, 1.0 - a, axis=0))
-    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=jnp.asarray(ws), converged=res.converged[1:])
+    with np.errstate(invalid="ignore"):
+        lo = jnp.asarray(np.nanquantile(ws, a, axis=0))
+        hi = jnp.asarray(np.nanquantile(ws, 1.0 - a, axis=0))
+    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=jnp.asarray(ws), converged=res.converged[1:],
+                           status=res.status[1:], w_status=res.status[0])
 
 
 @pytree_dataclass
@@ -158,6 +218,8 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
     b = jnp.asarray(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
     if a.ndim != 2 or b.ndim != 2:
         raise ValueError(f"`a` and `b` must be (N, p) matrices, got {a.shape} and {b.shape}")
+    if not isinstance(paired, bool | np.bool_):
+        raise TypeError(f"`paired` must be True or False, got {paired!r}")
     p = a.shape[1]
     if paired:
         if a.shape != b.shape:
@@ -182,6 +244,10 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
         t2 = n1 * n2 / (n1 + n2) * diff @ jnp.linalg.solve(S, diff)
         df1, df2 = p, n1 + n2 - p - 1
         f = df2 / (p * (n1 + n2 - 2)) * t2
+    Sn = np.asarray(S)
+    if np.linalg.matrix_rank(Sn, tol=1e-12 * max(float(np.abs(Sn).max()), 1e-300)) < p:
+        raise ValueError("the covariance of `a`/`b` is singular: drop variables that are constant or "
+                         "linearly dependent (e.g. weights fixed at 1) before the test")
     # F survival function through the regularised incomplete beta function
     x = df2 / (df2 + df1 * f)
     pval = jax.scipy.special.betainc(df2 / 2.0, df1 / 2.0, x)

@@ -8,7 +8,9 @@
 
 The paper generates "Q̇ and J_k from N(0, 1)" and "V from N(0, σ)"; velocities must satisfy the
 IK model of Eq 15, so here ``ẋ_k ~ N(0, I)``, ``J_k ~ N(0, 1)``, ``ṽ_k ~ N(0, σ² I)`` and
-``q̇_k = J#_{W*} ẋ_k + N_{W*} ṽ_k`` (the null-space part must satisfy ``J v = 0``, Eq 15).
+``q̇_k = J#_{W*} ẋ_k + N_{W*} ṽ_k`` (the null-space part must satisfy ``J v = 0``, Eq 15). Both
+generators go through the one weighted pseudo-inverse (``pmpjax.weighted_pinv``); the tests make
+their own data with NumPy.
 """
 
 from __future__ import annotations
@@ -19,16 +21,43 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._base.linalg import from_soa, mv, to_soa
-from pmpjax._pmp.redundancy import pinv_apply_diag_soa
+import pmpjax as pj
+from pmpjax._base.validate import check_positive_int
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 
 
-def fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
-    """Random data of Fig 1: returns ``qdot`` (R, K, n), ``xdot`` (R, K, m), ``J`` (R, K, m, n)."""
-    return _fig1_data(key, jnp.asarray(w_true, dtype=float), jnp.asarray(sigma, dtype=float),
-                      n_reps=int(n_reps), K=int(K), m=int(m))
+def _weights(w_true, n_min=2):
+    w = np.asarray(w_true, dtype=float)
+    if w.ndim != 1 or w.size < n_min or not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise ValueError(f"`w_true` must be {n_min} or more positive finite weights, got {w_true!r}")
+    return w
+
+
+def ik_fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
+    """Random data of Fig 1: returns ``qdot`` (R, K, n), ``xdot`` (R, K, m), ``J`` (R, K, m, n).
+
+    ``key`` a JAX PRNG key; ``n_reps`` R repetitions; ``K`` samples each; ``w_true`` (n,) the
+    weights ``W* = diag(w_true)``; ``m < n`` task dimensions; ``sigma`` ≥ 0 the null-space scale.
+    """
+    w = _weights(w_true)
+    n_reps, K, m = (check_positive_int(name, v) for name, v in (("n_reps", n_reps), ("K", K), ("m", m)))
+    if not m < w.size:
+        raise ValueError(f"`m` must be smaller than n = {w.size} (a redundant chain), got {m}")
+    if not (np.isfinite(float(sigma)) and float(sigma) >= 0):
+        raise ValueError(f"`sigma` must be a finite number >= 0, got {sigma}")
+    _check_key(key)
+    return _fig1_data(key, jnp.asarray(w), jnp.asarray(float(sigma)), n_reps=n_reps, K=K, m=m)
+
+
+def _check_key(key, name="key"):
+    """A JAX PRNG key: a typed key (``jax.random.key``) or a raw uint32 (2,) (``PRNGKey``)."""
+    dtype = getattr(key, "dtype", None)
+    if dtype is not None and jnp.issubdtype(dtype, jax.dtypes.prng_key) and np.shape(key) == ():
+        return
+    if dtype == np.uint32 and np.shape(key) == (2,):
+        return
+    raise TypeError(f"`{name}` must be one JAX PRNG key (jax.random.PRNGKey(seed)), got {key!r}")
 
 
 @partial(jax.jit, static_argnames=("n_reps", "K", "m"))
@@ -39,44 +68,42 @@ def _fig1_data(key, w_true, sigma, *, n_reps, K, m):
     J = z[..., : m * n].reshape(n_reps, K, m, n)
     xdot = z[..., m * n : m * n + m]
     v = sigma * z[..., m * n + m :]
-    # q̇ = J#_W ẋ + N_W ṽ = ṽ + J#_W (ẋ − J ṽ), through the one pseudo-inverse kernel
-    Jc, vc = to_soa(J, 2), to_soa(v)
-    a = jnp.broadcast_to((1.0 / w_true).reshape((n, 1, 1)), (n, n_reps, K))
-    qdot = vc + pinv_apply_diag_soa(Jc, a, to_soa(xdot) - mv(Jc, vc))[0]
-    return from_soa(qdot), xdot, J
+    # q̇ = J#_W ẋ + N_W ṽ = ṽ + J#_W (ẋ − J ṽ)
+    Jp = pj.weighted_pinv(J, w=jnp.broadcast_to(w_true, (n_reps, K, n)))
+    qdot = v + jnp.einsum("rkij,rkj->rki", Jp, xdot - jnp.einsum("rkij,rkj->rki", J, v))
+    return qdot, xdot, J
 
 
-def fig3_data(*, w_true=(1.0, 0.01), k_task: float = 1.0, k_null: float = 1.0, dt: float = 0.1,
-              duration: float = 6.0, q0=(0.5, 0.5)):
+def ik_fig3_data(*, w_true=(1.0, 0.01), k_task: float = 1.0, k_null: float = 1.0, dt: float = 0.1,
+                 duration: float = 6.0, q0=(0.5, 0.5)):
     """Two prismatic joints, 1-D task (Fig 3). Returns ``qdot`` (K, 2), ``xdot`` (K, 1), ``J`` (K, 1, 2).
 
-    ``q̇ = J#_{W*} k_task (x_g(t) − x) + N_{W*} (−k_null q1, 0)``, explicit Euler at ``dt``;
-    the goal switches 1 → 1.5 at t = 2 s → 0.5 at t = 3 s. (The paper's null-space term is
-    printed garbled; this is the reading "pull joint 1 to zero".)
+    ``q̇ = J#_{W*} k_task (x_g(t) − x) + N_{W*} (−k_null q1, 0)``, explicit Euler at ``dt`` [s]
+    for ``duration`` [s] from ``q0``; the goal switches 1 → 1.5 at t = 2 s → 0.5 at t = 3 s. (The
+    paper's null-space term is printed garbled; this is the reading "pull joint 1 to zero".)
     """
-    w = np.asarray(w_true, dtype=float)
-    J = np.array([[1.0, 1.0]])
-    Jp = (J / w).T / ((J / w) @ J.T)[0, 0]
-    N = np.eye(2) - Jp @ J
+    w = _weights(w_true)
+    if w.size != 2:
+        raise ValueError(f"`w_true` must hold the 2 weights of the two joints, got {w_true!r}")
+    for name, v in (("k_task", k_task), ("k_null", k_null)):
+        if not (np.isfinite(float(v)) and float(v) >= 0):
+            raise ValueError(f"`{name}` must be a finite gain >= 0, got {v}")
+    for name, v in (("dt", dt), ("duration", duration)):
+        if not (np.isfinite(float(v)) and float(v) > 0):
+            raise ValueError(f"`{name}` must be a positive time [s], got {v}")
     q = np.asarray(q0, dtype=float)
-    qd, xd, Js = [], [], []
+    if q.shape != (2,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"`q0` must be 2 finite joint positions, got {q0!r}")
     K = int(round(duration / dt))
+    if K < 1:
+        raise ValueError(f"`duration` ({duration}) must hold at least one step `dt` ({dt})")
+    J = np.array([[1.0, 1.0]])
+    Jp = np.asarray(pj.weighted_pinv(J, w=w))  # (2, 1), constant: the chain is prismatic
+    N = np.asarray(pj.nullspace_projector(J, w=w))
+    qd = np.empty((K, 2))
     for k in range(K):
         t = k * dt
         xg = 1.0 if t < 2.0 else (1.5 if t < 3.0 else 0.5)
-        v = np.array([-k_null * q[0], 0.0])
-        qdot = Jp[:, 0] * k_task * (xg - q.sum()) + N @ v
-        qd.append(qdot)
-        xd.append(J @ qdot)
-        Js.append(J)
-        q = q + dt * qdot
-    return np.array(qd), np.array(xd), np.array(Js)
-
-
-def fig2_gammas():
-    """The γ values swept in Fig 2 / Fig 3."""
-    return (0.0, 0.2, 0.4, 0.6, 0.8, 0.9)
-
-
-ik_fig1_data = fig1_data
-ik_fig3_data = fig3_data
+        qd[k] = Jp[:, 0] * k_task * (xg - q.sum()) + N @ np.array([-k_null * q[0], 0.0])
+        q = q + dt * qd[k]
+    return qd, qd @ J.T, np.broadcast_to(J, (K, 1, 2)).copy()

@@ -16,21 +16,36 @@ def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUG
     """
     import matplotlib.pyplot as plt
 
-    w = np.asarray(w, dtype=float)
+    try:
+        w = np.asarray(w, dtype=float)
+        lo = None if lo is None else np.asarray(lo, dtype=float)
+        hi = None if hi is None else np.asarray(hi, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError("`w`, `lo` and `hi` must be numeric arrays") from e
+    if (lo is None) != (hi is None):
+        raise ValueError("give both `lo` and `hi` (an interval) or neither")
     if w.ndim == 2:
         w = w[None]
-        lo = None if lo is None else np.asarray(lo)[None]
-        hi = None if hi is None else np.asarray(hi)[None]
+        lo = None if lo is None else lo[None]
+        hi = None if hi is None else hi[None]
     if w.ndim != 3:
         raise ValueError(f"`w` must be (P, G, n) or (G, n), got shape {w.shape}")
+    for name, a in (("lo", lo), ("hi", hi)):
+        if a is not None and a.shape != w.shape:
+            raise ValueError(f"`{name}` must have the shape of `w` {w.shape}, got {a.shape}")
     P, G, n = w.shape
+    for name, names, k in (("groups", groups, G), ("panels", panels, P)):
+        if names is not None and len(names) != k:
+            raise ValueError(f"`{name}` must hold {k} names, got {len(names)}")
     groups = groups or [f"task {g + 1}" for g in range(G)]
     panels = panels or [f"{p + 1}" for p in range(P)]
     if ax is None:
         fig, axes = plt.subplots(P, 1, figsize=(max(6, 1.2 * G), 2.2 * P), sharex=True, squeeze=False)
         axes = axes[:, 0]
     else:
-        axes = np.atleast_1d(ax)
+        axes = np.atleast_1d(ax).reshape(-1)
+        if len(axes) != P or not all(hasattr(a, "bar") for a in axes):
+            raise ValueError(f"`ax` must be {P} matplotlib axes (one per panel), got {ax!r}")
         fig = axes[0].figure
     width = 0.8 / n
     x = np.arange(G)

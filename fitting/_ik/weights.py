@@ -23,14 +23,13 @@ import numpy as np
 from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from pmpjax import Status
 from pmpjax._base.linalg import det, mv, to_soa
 from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.validate import as_array, check_positive_int, is_concrete
+from pmpjax._base.validate import as_array, check_positive, check_positive_int, is_concrete
 from pmpjax._pmp.redundancy import pinv_apply_diag_soa, pinv_diag_lists
 
 from .._optimise import least_squares
-
-OK, NONFINITE, INVALID_INPUT = 0, 1, 2
 
 
 @pytree_dataclass
@@ -40,9 +39,14 @@ class IKWeightsResult:
     ``w`` (..., n) weights in ``[w_min, 1]`` with ``max w = 1`` (over free joints); ``error`` (...,)
     the mean modelling error ``(1/K) Σ |q̇_k − q̇̄_k|`` of the last evaluation (Algorithm 1, line 8);
     ``error_history`` (..., max_iter) one entry per iteration (NaN after the item stopped);
-    ``iterations`` (...,) updates done; ``converged`` (...,) error ≤ ``tol`` or weight change ≤
-    ``step_tol``; ``gamma`` (...,) the null-space ratio at the end; ``status`` (...,) 0 ok,
-    1 non-finite, 2 invalid input (only with ``on_invalid="flag"``).
+    ``iterations`` (...,) updates done; ``gamma`` (...,) the null-space ratio at the end;
+    ``status`` (...,) int ``pj.Status`` code: ``SUCCESSFUL`` the paper's criterion ``e ≤ ε`` (line 2)
+    was met; ``STALLED`` the weights stopped moving (no weight changed by more than ``step_tol``: a
+    fixed point of the update) with ``e > ε``; ``SCHEDULE_END`` a γ schedule drove γ towards 1, which
+    shrinks the error and the updates whatever the weights (Eq 17), and ended the run before
+    ``e ≤ ε`` was met at the starting ratio; ``MAX_STEPS`` ``max_iter`` updates without a stop;
+    ``NONFINITE``; ``INVALID_INPUT`` (only with ``on_invalid="flag"``). ``converged`` (...,) is
+    ``status == SUCCESSFUL``.
     """
 
     w: jax.Array
@@ -94,6 +98,15 @@ def _check_gamma(gamma, gamma_rate):
         c = float(gamma_rate)
         if not (0.0 <= c <= 1.0):
             raise ValueError(f"`gamma_rate` must lie in [0, 1] (γ ← γ + c (1 − γ)), got {c}")
+
+
+def _check_gamma_shape(g, batch):
+    try:
+        ok = not g.ndim or tuple(np.broadcast_shapes(g.shape, batch)) == batch
+    except ValueError:
+        ok = False
+    if not ok:
+        raise ValueError(f"`gamma` must be a scalar or broadcast to the batch shape {batch}, got shape {g.shape}")
 
 
 def _fixed_mask(fixed, n):
@@ -149,8 +162,14 @@ def _sample_sums(ops):
     return lax.reduce(ops, [zero] * len(ops), lambda a, b: [x + y for x, y in zip(a, b)], (1,))
 
 
-def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
-    """Exact solution of the box QP of Eq 24 (diagonal Hessian), then normalisation (line 21)."""
+def _qp_update(w, psi, omega, w_min, w_max, fixed):
+    """Algorithm 1 lines 16–21: the box QP of Eq 24 solved exactly, then normalised.
+
+    ``psi``, ``omega`` (n, n, C); ``w`` (n, C, 1) the current weights (kept where a row of Ψ is 0).
+    ``Ψ̃`` stacks ``diag(Ψ_{:, j})``, so ``H = Ψ̃ᵀ Ψ̃`` is diagonal (``H_ii = Σ_j Ψ_ij²``) and the QP
+    separates per joint: its minimiser on ``[w_min, w_max]`` is the clipped ratio
+    ``clip(−F_i / H_ii)``, ``−F_i = Σ_j Ψ_ij Ω_ij`` (tested against ``scipy.optimize.lsq_linear``
+    on the whole Algorithm 1). Returns (n, C)."""
     num = jnp.sum(psi * omega, axis=1)  # −F_i = Σ_j Ψ_ij Ω_ij
     den = jnp.sum(psi * psi, axis=1)  # H_ii = Σ_j Ψ_ij²
     safe = den > 1e-300
@@ -160,30 +179,6 @@ def _closed_form_update(w, psi, omega, w_min, w_max, fixed):
     # over-specified joints (Experiment 1): set back to 1, normalise the others only
     top = jnp.max(jnp.where(free, wn, -jnp.inf), axis=0, keepdims=True)
     return jnp.where(free, wn / top, 1.0)
-
-
-@jax.jit
-def qp_matrices(psi, omega):
-    """Algorithm 1 lines 16–19: ``Ψ̃`` (n², n), ``Ω̃`` (n²,), ``H = Ψ̃ᵀΨ̃``, ``F = −Ω̃ᵀΨ̃``.
-
-    ``psi``, ``omega``: (n, n). Block j of ``Ψ̃`` is ``diag(Ψ_{:, j})`` and of ``Ω̃`` is ``Ω_{:, j}``.
-    """
-    psi, omega = jnp.asarray(psi), jnp.asarray(omega)
-    n = psi.shape[0]
-    Pt = jnp.concatenate([jnp.diag(psi[:, j]) for j in range(n)], axis=0)
-    Ot = jnp.concatenate([omega[:, j] for j in range(n)])
-    return Pt, Ot, Pt.T @ Pt, -(Ot @ Pt)
-
-
-@jax.jit
-def box_qp_update(psi, omega, *, w_min=1e-3, w_prev=None):
-    """Closed-form minimiser of Eq 24 on ``[w_min, 1]ⁿ`` (before normalisation), ``psi`` (..., n, n)."""
-    psi, omega = jnp.asarray(psi), jnp.asarray(omega)
-    num = jnp.sum(psi * omega, axis=-1)
-    den = jnp.sum(psi * psi, axis=-1)
-    w_prev = jnp.ones_like(num) if w_prev is None else jnp.asarray(w_prev)
-    safe = den > 1e-300
-    return jnp.clip(jnp.where(safe, num / jnp.where(safe, den, 1.0), w_prev), w_min, 1.0)
 
 
 def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, max_iter, fixed):
@@ -220,24 +215,35 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
         omega = jnp.stack(sums[1 + n * n :]).reshape((n, n, C))  # Ω = Ū Q̇ᵀ
         err = sums[0] / count
         psi = qqT - S  # Ψ = (Q̇ − V̄) Q̇ᵀ
-        wn = _closed_form_update(w, psi, omega, w_min, w_max, fixed)[..., None]
+        wn = _qp_update(w, psi, omega, w_min, w_max, fixed)[..., None]
         active = ~s["done"]
         finite = jnp.all(jnp.isfinite(wn), axis=(0, -1)) & jnp.isfinite(err)
         step = jnp.max(jnp.abs(wn - w), axis=(0, -1))
-        conv = finite & ((err <= tol) | (step <= step_tol))
+        # With a γ schedule the error (Eq 17: (1 − γ) N q̇) shrinks as γ → 1 whatever the weights:
+        # judge it at the starting ratio, ê = e (1 − γ0)/(1 − γ_{t−1}) (= e for a constant γ).
+        g_prev = s["gamma_prev"]
+        grown = g_prev > gamma0
+        room = 1.0 - g_prev
+        e_hat = jnp.where(grown, jnp.where(room > 0, err * (1.0 - gamma0) / jnp.where(room > 0, room, 1.0),
+                                           jnp.inf), err)
+        scheduled = rate > 0
+        status = jnp.select(
+            [~finite, e_hat <= tol, scheduled & ((err <= tol) | (step <= step_tol)), step <= step_tol],
+            [Status.NONFINITE, Status.SUCCESSFUL, Status.SCHEDULE_END, Status.STALLED],
+            Status.MAX_STEPS).astype(jnp.int32)
+        stop = status != Status.MAX_STEPS
         it = s["it"]
         a1 = active[:, None]
         return dict(
             w=jnp.where(a1 & finite[:, None], wn, w),
             w_prev=jnp.where(a1, w, s["w_prev"]),
-            gamma_prev=jnp.where(active, g, s["gamma_prev"]),
+            gamma_prev=jnp.where(active, g, g_prev),
             gamma=jnp.where(active, g + rate * (1.0 - g), g),  # γ_{t+1} = γ_t + c (1 − γ_t)
             err=jnp.where(active, err, s["err"]),
             hist=s["hist"].at[it].set(jnp.where(active, err, jnp.nan)),
             iters=s["iters"] + active.astype(s["iters"].dtype),
-            conv=jnp.where(active, conv, s["conv"]),
-            fin=jnp.where(active, finite, s["fin"]),
-            done=s["done"] | conv | ~finite,
+            status=jnp.where(active, status, s["status"]),
+            done=s["done"] | stop,
             it=it + 1,
         )
 
@@ -252,13 +258,13 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
         err=jnp.full((C,), jnp.nan, qd.dtype),
         hist=jnp.full((max_iter, C), jnp.nan, qd.dtype),
         iters=jnp.zeros((C,), jnp.int32),
-        conv=jnp.zeros((C,), bool),
-        fin=jnp.ones((C,), bool),
+        # items without a valid sample (flagged or padding) never start
+        status=jnp.where(count == 0, Status.INVALID_INPUT, Status.MAX_STEPS).astype(jnp.int32),
         done=count == 0,
         it=jnp.asarray(0),
     )
     s = lax.while_loop(cond, body, s0)
-    return s["w"][..., 0], s["err"], s["hist"], s["iters"], s["conv"], s["gamma"], s["fin"]
+    return s["w"][..., 0], s["err"], s["hist"], s["iters"], s["status"], s["gamma"]
 
 
 def _algorithm1_local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, *, max_iter,
@@ -415,13 +421,19 @@ def estimate_ik_weights(
     positive floor of the box ``[w_min, w_max]``; ``w_max`` its upper bound (1 in the paper; ``None``
     drops it, which makes the update scale-free: with the bound, raw weights above 1 are clipped
     before the normalisation and their ratios are lost, which can stall the iteration); ``tol``
-    the mean-error threshold ε (line 2);
-    ``step_tol`` stop when no weight changes by more than this; ``max_iter`` iteration cap;
-    ``gamma_rate`` c of the schedule ``γ ← γ + c (1 − γ)`` after each iteration (None: constant);
+    the mean-error threshold ε of the paper's stopping rule ``e ≤ ε`` (line 2; status
+    ``SUCCESSFUL``); ``step_tol`` stop (status ``STALLED``) when no weight changes by more than
+    this, a fixed point of the update whose error is above ε (with ``γ < 1`` the error of Eq 17
+    rarely reaches a small ε: the paper's Fig 1 ends near 0.07, so most runs end ``STALLED``, and
+    ``w`` is then the fixed point); ``max_iter`` iteration cap (status ``MAX_STEPS``);
+    ``gamma_rate`` c of the schedule ``γ ← γ + c (1 − γ)`` after each iteration (None: constant;
+    γ → 1 makes both the error and the updates vanish whatever the weights, so with a schedule the
+    error is judged at the starting ratio, ``ê = e (1 − γ0)/(1 − γ)``, and a run that stops because
+    ``e ≤ ε`` or the weights stopped moving while ``ê > ε`` reports ``SCHEDULE_END``);
     ``fixed`` joints (bool (n,) mask or indices) held at 1 and left out of the normalisation (the
     over-specified-joint convention of Experiment 1); ``on_invalid`` 'raise' (default) or 'flag'
-    items with NaN/inf velocities or rank-deficient Jacobians (``status`` 2, ``w`` NaN) while the
-    others go on; ``rank_tol`` threshold on ``det(JJᵀ)/(tr(JJᵀ)/m)^m``; ``devices`` the devices
+    items with NaN/inf velocities or rank-deficient Jacobians (status ``INVALID_INPUT``, ``w``
+    NaN) while the others go on; ``rank_tol`` threshold on ``det(JJᵀ)/(tr(JJᵀ)/m)^m``; ``devices`` the devices
     over which the items are split (default: all of ``jax.local_devices()``; on a CPU, start Python
     with ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` to get one device per core:
     an XLA:CPU device also spreads each large fused loop over its own thread pool). Each device
@@ -439,12 +451,14 @@ def estimate_ik_weights(
     if w_max is not None and not float(w_max) >= 1.0:
         raise ValueError(f"`w_max` must be >= 1 or None, got {w_max}")
     check_positive_int("max_iter", max_iter)
+    for name, v in (("tol", tol), ("step_tol", step_tol), ("rank_tol", rank_tol)):
+        if not (np.isfinite(float(v)) and float(v) >= 0):
+            raise ValueError(f"`{name}` must be a finite number >= 0, got {v}")
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     batch = tuple(qdot.shape[:-2])
     g = jnp.asarray(gamma, dtype=jnp.result_type(float))
-    if g.ndim and tuple(np.broadcast_shapes(g.shape, batch)) != batch:
-        raise ValueError(f"`gamma` must be a scalar or broadcast to the batch shape {batch}, got {g.shape}")
+    _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
     flat = lambda a, k: a.reshape((B,) + a.shape[a.ndim - k:])  # noqa: E731
@@ -485,16 +499,14 @@ def estimate_ik_weights(
     if concrete:  # the device arrays may alias the caller's NumPy inputs: finish before returning
         out = jax.block_until_ready(out)
     unflat = lambda a: a[:B].reshape(batch + a.shape[1:])  # noqa: E731
-    w, err, hist, iters, conv, gam, fin = (unflat(a) for a in out)
-    status = jnp.where(fin, OK, NONFINITE)
+    w, err, hist, iters, status, gam = (unflat(a) for a in out)
     if flags is not None and flags.any():
         fl = jnp.asarray(flags.reshape(batch))
-        status = jnp.where(fl, INVALID_INPUT, status)
+        status = jnp.where(fl, Status.INVALID_INPUT, status)
         w = jnp.where(fl[..., None], jnp.nan, w)
         err = jnp.where(fl, jnp.nan, err)
-        conv = conv & ~fl
-    return IKWeightsResult(w=w, error=err, error_history=hist, iterations=iters, converged=conv,
-                           gamma=gam, status=status)
+    return IKWeightsResult(w=w, error=err, error_history=hist, iterations=iters,
+                           converged=status == Status.SUCCESSFUL, gamma=gam, status=status)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -515,7 +527,16 @@ def ik_model_error(w, qdot, xdot, J, gamma=0.0, *, mask=None):
     Differentiable in ``w`` and the data; invariant to the scale of ``w`` (Eq 4).
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
+    _check_gamma(gamma, None)
     w = as_array("w", w, tail=(qdot.shape[-1],))
+    check_positive("w", w)
+    batch = tuple(qdot.shape[:-2])
+    try:
+        np.broadcast_shapes(tuple(w.shape[:-1]), batch)
+    except ValueError as e:
+        raise ValueError(f"`w` (..., n) must broadcast to the data's batch shape {batch}, got {tuple(w.shape)}") from e
+    if tuple(np.broadcast_shapes(tuple(w.shape[:-1]), batch)) != batch:
+        raise ValueError(f"`w` has batch axes {tuple(w.shape[:-1])} beyond the data's {batch}")
     qd, xd, Jc, valid = _prepare(qdot, xdot, J, mask)
     w = jnp.broadcast_to(jnp.asarray(w, dtype=qd.dtype), tuple(qdot.shape[:-2]) + (qdot.shape[-1],))
     wc = to_soa(w)[..., None]
@@ -535,49 +556,92 @@ def _lm_residual(theta, args):
     return jnp.concatenate([r.reshape(-1) * scale, jnp.atleast_1d(1e-3 * jnp.mean(theta))])
 
 
+def _lm_cost(theta, data, free):
+    r = _lm_residual(theta, tuple(data) + (jnp.asarray(free), jnp.zeros(data[0].shape[0], data[0].dtype)))
+    return 0.5 * jnp.sum(r * r)
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(0, 1))
+def _lm_fit(free, max_steps, q, x, Jb, v, g):
+    """Free log-weights at the LM optimum of one item, and (steps, converged) as floats."""
+    args = (q, x, Jb, v, g, jnp.asarray(free), jnp.zeros(q.shape[0], q.dtype))
+    res = least_squares(_lm_residual, jnp.zeros(len(free), q.dtype), args, max_steps=max_steps, ftol=0.0,
+                        gtol=1e-13)
+    return res.x, jnp.stack([res.steps.astype(q.dtype), res.converged.astype(q.dtype)])
+
+
+@_lm_fit.defjvp
+def _lm_fit_jvp(free, max_steps, primals, tangents):
+    """Implicit function theorem at the optimum: ``∇_θ C(θ*, d) = 0`` gives
+    ``dθ* = −H⁻¹ ∂_d ∇_θ C · dd`` with the exact Hessian ``H = ∇²_θ C`` (linear in ``dd``, so it
+    transposes for reverse mode). The LM iterations are never differentiated."""
+    theta, aux = _lm_fit(free, max_steps, *primals)
+    grad = lambda th, d: jax.grad(_lm_cost)(th, d, free)  # noqa: E731
+    H = jax.jacfwd(grad)(theta, primals)
+    _, dg = jax.jvp(lambda d: grad(theta, d), (primals,), (tangents,))
+    dtheta = -jnp.linalg.solve(H, dg)
+    return (theta, aux), (jnp.where(aux[1] > 0, dtheta, 0.0), jnp.zeros_like(aux))
+
+
+def _lm_one(q, x, Jb, v, g, *, free, max_steps):
+    """One item: normalised weights (n,), cost, LM steps, status."""
+    n = q.shape[0]
+    theta, aux = _lm_fit(free, max_steps, q, x, Jb, v, g)
+    logw = jnp.zeros(n, q.dtype).at[jnp.asarray(free)].set(theta - jnp.max(theta))
+    cost = _lm_cost(theta, (q, x, Jb, v, g), free)
+    status = jnp.select([~jnp.isfinite(cost), aux[1] > 0], [Status.NONFINITE, Status.SUCCESSFUL],
+                        Status.MAX_STEPS).astype(jnp.int32)
+    return jnp.exp(logw), cost, aux[0].astype(jnp.int32), status
+
+
 @partial(jax.jit, static_argnames=("free", "max_steps"))
 def _lm_batch(qd, xd, Jc, valid, gamma, *, free, max_steps):
-    n = qd.shape[0]
-    free_idx = jnp.asarray(free)
-    base = jnp.zeros(n, qd.dtype)
-
-    def one(q, x, Jb, v, g):
-        res = least_squares(_lm_residual, jnp.zeros(len(free), qd.dtype),
-                            (q, x, Jb, v, g, free_idx, base), max_steps=max_steps)
-        logw = base.at[free_idx].set(res.x)
-        logw = jnp.where(base.at[free_idx].set(1.0) > 0, logw - jnp.max(res.x), 0.0)
-        return jnp.exp(logw), res.cost, res.steps, res.converged
-
-    # move batch to the front for vmap: (n, B, K) -> (B, n, K)
+    # batch to the front for vmap: (n, B, K) -> (B, n, K)
     f = lambda a: jnp.moveaxis(a, 1, 0)  # noqa: E731
+    one = partial(_lm_one, free=free, max_steps=max_steps)
     return jax.vmap(one)(f(qd), f(xd), jnp.moveaxis(Jc, 2, 0), valid, gamma)
 
 
 @pytree_dataclass
 class IKWeightsLMResult:
-    """``w`` (..., n) normalised weights; ``cost`` ½ Σ|e|²/K at the optimum; ``steps``; ``converged``."""
+    """``w`` (..., n) normalised weights; ``cost`` ½ Σ|e|²/K at the optimum; ``steps`` LM
+    iterations; ``status`` (...,) int ``pj.Status`` (``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``);
+    ``converged`` ``status == SUCCESSFUL``."""
 
     w: jax.Array
     cost: jax.Array
     steps: jax.Array
     converged: jax.Array
+    status: jax.Array
 
 
 def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float = 1e-3,
                            fixed=None, max_steps: int = 100) -> IKWeightsLMResult:
     """Gradient-based variant: minimise ``(1/K) Σ_k |e_k|²`` (Eq 16) over log-weights by LM.
 
-    Same inputs as :func:`estimate_ik_weights`. The parameters are ``log w`` of the free joints
-    (positivity without bounds); the scale freedom is pinned by a small gauge residual and the
-    result normalised to ``max w = 1`` (free joints), then floored at ``w_min``. When
-    ``ẋ = J q̇`` holds exactly, ``e_k = (1 − γ) N q̇_k`` and the minimiser does not depend on γ.
+    Same inputs as :func:`estimate_ik_weights` (``gamma`` scalar or (...,) per item). The
+    parameters are ``log w`` of the free joints (positivity without bounds); the scale freedom is
+    pinned by a small gauge residual and the result normalised to ``max w = 1`` (free joints), then
+    floored at ``w_min``. When ``ẋ = J q̇`` holds exactly, ``e_k = (1 − γ) N q̇_k`` and the
+    minimiser does not depend on γ. Each item is fitted independently (``jax.vmap`` of
+    ``fitting.least_squares``).
+
+    **Differentiable** with respect to ``qdot``, ``xdot``, ``J`` and ``gamma`` (``jax.grad``,
+    ``jax.jvp``, inside ``jit``/``vmap``): the fitted optimum is differentiated by the implicit
+    function theorem (exact Hessian of the cost at the optimum), not through the iterations. Items
+    whose fit did not converge have zero derivative.
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
     _check_gamma(gamma, None)
+    if not (0.0 < float(w_min) < 1.0):
+        raise ValueError(f"`w_min` must lie in (0, 1), got {w_min}")
+    check_positive_int("max_steps", max_steps)
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     free = tuple(i for i in range(n) if not fixed_t[i])
     batch = tuple(qdot.shape[:-2])
+    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
     qf, xf, Jf = qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)), J.reshape((B, K) + tuple(J.shape[-2:]))
@@ -585,9 +649,10 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
         mf = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
         _screen(qf, xf, Jf, mf, "raise", 1e-10, batch)
     qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask).reshape(B, K))
-    g = jnp.broadcast_to(jnp.asarray(gamma, dtype=qd.dtype), batch).reshape(B)
-    w, cost, steps, conv = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
-                                     max_steps=int(max_steps))
+    g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(B)
+    w, cost, steps, status = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
+                                       max_steps=int(max_steps))
     w = jnp.maximum(w, w_min)
-    return IKWeightsLMResult(w=w.reshape(batch + (n,)), cost=cost.reshape(batch),
-                             steps=steps.reshape(batch), converged=conv.reshape(batch))
+    status = status.reshape(batch)
+    return IKWeightsLMResult(w=w.reshape(batch + (n,)), cost=cost.reshape(batch), steps=steps.reshape(batch),
+                             converged=status == Status.SUCCESSFUL, status=status)
