@@ -48,3 +48,81 @@ def test_figure3_and_main_job(tmp_path):
     a = res["A_net_out"]
     assert abs(a["NE"] - a["SW"]) < 1e-4 and abs(a["NW"] - a["SE"]) < 1e-4
     assert min(abs(a["NE"]), abs(a["NW"])) > 3 * max(abs(a["N"]), abs(a["E"]))
+
+
+def _shoelace(poly):
+    """Signed area of a closed polygon (N, 2) (counter-clockwise positive)."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+
+
+def _clip_half_plane(poly, normal):
+    """Sutherland–Hodgman: the part of polygon ``poly`` with ``poly @ normal >= 0``."""
+    out = []
+    n = len(poly)
+    for i in range(n):
+        p, q = poly[i], poly[(i + 1) % n]
+        dp, dq = p @ normal, q @ normal
+        if dp >= 0:
+            out.append(p)
+        if (dp >= 0) != (dq >= 0):
+            out.append(p + (q - p) * dp / (dp - dq))
+    return np.array(out) if out else np.zeros((0, 2))
+
+
+def _polygon_areas(path, start, end):
+    """Reference (A_R, A_L): the closed polygon start → path → end → start (back along the
+    line), cut by the line and measured by the shoelace formula. A lobe on the left is traversed
+    clockwise (forward along the path, back along the line), one on the right anticlockwise."""
+    u = (end - start) / np.linalg.norm(end - start)
+    left = np.array([-u[1], u[0]])
+    poly = np.vstack([start, path, end]) - start
+    a_left = -_shoelace(_clip_half_plane(poly, left))
+    a_right = _shoelace(_clip_half_plane(poly, -left))
+    return a_right, a_left
+
+
+def test_curvature_areas_close_open_paths_like_a_polygon():
+    # Measured paths cut at 20 % of peak speed start and end off the line that joins the targets:
+    # the closing segments (start target → first sample, last sample → end target) enclose area.
+    rng = np.random.default_rng(5)
+    start, end = np.array([0.1, -0.05]), np.array([0.3, 0.2])
+    u = (end - start) / np.linalg.norm(end - start)
+    nrm = np.array([-u[1], u[0]])
+    L = np.linalg.norm(end - start)
+    for k in range(6):
+        s = np.linspace(0.05, 0.93, 40) * L  # never reaches the targets along the line
+        off = 0.03 * np.sin(np.pi * s / L * (1 + k % 3)) + 0.01 * rng.normal() + 0.004 * rng.normal(size=40)
+        path = start + s[:, None] * u + off[:, None] * nrm
+        a_r, a_l = (float(v) for v in pj.curvature_areas(path, start, end))
+        ref_r, ref_l = _polygon_areas(path, start, end)
+        np.testing.assert_allclose([a_r, a_l], [ref_r, ref_l], rtol=1e-10, atol=1e-14)
+    # One-sided open path: the area is the whole polygon's shoelace area.
+    s = np.linspace(0.1, 0.8, 30) * L
+    path = start + s[:, None] * u + (0.02 + 0.05 * np.sin(np.pi * s / L))[:, None] * nrm
+    a_r, a_l = pj.curvature_areas(path, start, end)
+    assert float(a_r) == 0.0
+    np.testing.assert_allclose(float(a_l), abs(_shoelace(np.vstack([start, path, end]))), rtol=1e-12)
+
+
+def test_curvature_areas_gradient_matches_central_differences():
+    import jax
+
+    rng = np.random.default_rng(2)
+    s = np.linspace(0.05, 0.95, 25)
+    path = np.stack([s, 0.05 * np.sin(2 * np.pi * s) + 0.01], -1) + 0.002 * rng.normal(size=(25, 2))
+    start, end = np.array([0.0, 0.0]), np.array([1.0, 0.1])
+    w = rng.normal(size=2)
+
+    def f(p):
+        a_r, a_l = pj.curvature_areas(p, start, end)
+        return w[0] * a_r + w[1] * a_l
+
+    f = jax.jit(f)
+    g = np.asarray(jax.grad(f)(path))
+    h = np.sqrt(np.finfo(float).eps) * 0.1
+    for i, j in [(0, 1), (3, 0), (12, 1), (24, 1), (24, 0)]:
+        e = np.zeros_like(path)
+        e[i, j] = h
+        fd = (float(f(path + e)) - float(f(path - e))) / (2 * h)
+        np.testing.assert_allclose(g[i, j], fd, rtol=1e-6, atol=1e-9)
