@@ -67,8 +67,10 @@ from ._springy_arm.reflexes import run_reflexes as run_reflexes
 from ._springy_arm.reflexes import script_inputs as script_inputs
 from ._springy_arm.reflexes import stack_inputs as stack_inputs
 from ._wrist.center_out import DIRECTIONS as DIRECTIONS
+from ._wrist.center_out import TARGET_RADIUS as TARGET_RADIUS
 from ._wrist.center_out import center_out_targets as center_out_targets
 from ._wrist.center_out import center_out_trials as center_out_trials
+from ._wrist.center_out import target_radius as target_radius
 from ._wrist.curvature import curvature_areas as curvature_areas
 from ._wrist.curvature import curvature_measures as curvature_measures
 from ._wrist.donders import DondersSurface as DondersSurface

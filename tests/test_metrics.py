@@ -23,6 +23,7 @@ def test_curvature_areas_closed_forms():
     np.testing.assert_allclose([a_r, a_l], [0.1 / np.pi] * 2, rtol=1e-6)
 
 
+@pytest.mark.bad_input("pj.curvature_areas", "pj.curvature_measures")
 def test_curvature_measures_batch_and_errors():
     s = np.linspace(0, 1, 101)
     paths = np.stack([np.stack([s, k * s * (1 - s)], -1) for k in (-0.4, 0.0, 0.4)])
@@ -32,6 +33,12 @@ def test_curvature_measures_batch_and_errors():
     np.testing.assert_allclose(a_sum, [exact, 0.0, exact], rtol=1e-3)
     with pytest.raises(ValueError, match="path"):
         pj.curvature_areas(np.zeros((5, 3)), np.zeros(2), np.ones(2))
+    with pytest.raises(ValueError, match="`path` needs at least 2"):
+        pj.curvature_measures(np.zeros((1, 2)), np.zeros(2), np.ones(2))
+    with pytest.raises(ValueError, match="`start`"):
+        pj.curvature_measures(paths[0], np.array([np.nan, 0.0]), np.ones(2))
+    with pytest.raises(ValueError, match="`end`"):
+        pj.curvature_areas(paths[0], np.zeros(2), np.ones(3))
 
 
 def test_figure3_and_main_job(tmp_path):
@@ -126,3 +133,35 @@ def test_curvature_areas_gradient_matches_central_differences():
         e[i, j] = h
         fd = (float(f(path + e)) - float(f(path - e))) / (2 * h)
         np.testing.assert_allclose(g[i, j], fd, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.bad_input("pj.center_out_targets", "pj.center_out_trials", "pj.target_radius")
+def test_target_radius_nominal_or_visual_angle():
+    from _reference import wrist_fk
+
+    # Default: the paper's nominal π/12 m (which also normalises the curvature areas).
+    tg = pj.center_out_targets()
+    assert pj.TARGET_RADIUS == np.pi / 12 and pj.FIGURE3["radius"] == np.pi / 12
+    np.testing.assert_allclose([np.linalg.norm(tg[k]) for k in pj.DIRECTIONS], np.pi / 12, rtol=1e-15)
+    # A true 15° visual angle through Eq 6 (independent FK): pure FE of +15° points West, pure
+    # RUD of +15° points South, at d·sin 15° (not π/12) from the centre, for any screen distance.
+    for d in (1.0, 0.7):
+        tg = pj.center_out_targets(angle_deg=15.0, d=d)
+        np.testing.assert_allclose(tg["W"], wrist_fk(np.deg2rad([0.0, 15.0, 0.0]), d), atol=1e-15)
+        np.testing.assert_allclose(tg["S"], wrist_fk(np.deg2rad([0.0, 0.0, 15.0]), d), atol=1e-15)
+        assert abs(pj.target_radius(angle_deg=15.0, d=d) - d * 0.25881904510252074) < 1e-15
+    # User-set radius flows through the protocol.
+    _, seq = pj.center_out_trials(2, seed=1, radius=0.2)
+    np.testing.assert_allclose(np.linalg.norm(seq[:, 0::2], axis=-1), 0.2)
+    _, seq = pj.center_out_trials(2, seed=1, angle_deg=10.0)
+    np.testing.assert_allclose(np.linalg.norm(seq[:, 0::2], axis=-1), np.sin(np.deg2rad(10.0)))
+    with pytest.raises(ValueError, match="at most one of `radius`"):
+        pj.center_out_targets(0.2, angle_deg=15.0)
+    with pytest.raises(ValueError, match="`angle_deg`"):
+        pj.center_out_trials(2, angle_deg=95.0)
+    with pytest.raises(ValueError, match="`radius`"):
+        pj.center_out_targets(-0.1)
+    with pytest.raises(ValueError, match="`d`"):
+        pj.target_radius(angle_deg=15.0, d=0.0)
+    with pytest.raises(ValueError, match="`n_trials`"):
+        pj.center_out_trials(0)
