@@ -29,7 +29,13 @@ from ._ik.weights import ik_model_error as ik_model_error
 from ._optimise import LeastSquaresResult as LeastSquaresResult
 from ._optimise import covariance as covariance
 from ._optimise import least_squares as least_squares
+from ._pointing import PointingAnalysis as PointingAnalysis
+from ._pointing import PointingPrediction as PointingPrediction
+from ._pointing import analyze_pointing as analyze_pointing
+from ._pointing import predict_pointing as predict_pointing
 from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights
 from ._springy_arm import fit_stiffness as fit_stiffness
+from ._time_constants import TimeConstantFit as TimeConstantFit
+from ._time_constants import fit_time_constants as fit_time_constants

@@ -1,6 +1,7 @@
 """pmpjax: differentiable JAX toolkit for human-like posture and movement of redundant chains."""
 
 from ._analysis.movement import SmoothedPath as SmoothedPath
+from ._analysis.movement import gcv_lambda as gcv_lambda
 from ._analysis.movement import segment_by_speed as segment_by_speed
 from ._analysis.movement import smooth_path as smooth_path
 from ._base.status import Status as Status
@@ -100,6 +101,12 @@ from ._wrist.orientation import rotvec_from_matrix as rotvec_from_matrix
 from ._wrist.orientation import rotvec_from_quat as rotvec_from_quat
 from ._wrist.orientation import torsion_between as torsion_between
 from ._wrist.orientation import wrist_rotation as wrist_rotation
+from ._wrist.pointing import MOVEMENT_LABELS as MOVEMENT_LABELS
+from ._wrist.pointing import PointingRecording as PointingRecording
+from ._wrist.pointing import SyntheticPointing as SyntheticPointing
+from ._wrist.pointing import read_pointing as read_pointing
+from ._wrist.pointing import synthetic_pointing_experiment as synthetic_pointing_experiment
+from ._wrist.pointing import write_pointing as write_pointing
 from ._wrist.subjects import Subject as Subject
 from ._wrist.subjects import load_subject as load_subject
 from ._wrist.subjects import paper_subjects as paper_subjects

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from _reference import polygon_areas, shoelace
 
 import pmpjax as pj
 
@@ -57,38 +58,6 @@ def test_figure3_and_main_job(tmp_path):
     assert min(abs(a["NE"]), abs(a["NW"])) > 3 * max(abs(a["N"]), abs(a["E"]))
 
 
-def _shoelace(poly):
-    """Signed area of a closed polygon (N, 2) (counter-clockwise positive)."""
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
-
-
-def _clip_half_plane(poly, normal):
-    """Sutherland–Hodgman: the part of polygon ``poly`` with ``poly @ normal >= 0``."""
-    out = []
-    n = len(poly)
-    for i in range(n):
-        p, q = poly[i], poly[(i + 1) % n]
-        dp, dq = p @ normal, q @ normal
-        if dp >= 0:
-            out.append(p)
-        if (dp >= 0) != (dq >= 0):
-            out.append(p + (q - p) * dp / (dp - dq))
-    return np.array(out) if out else np.zeros((0, 2))
-
-
-def _polygon_areas(path, start, end):
-    """Reference (A_R, A_L): the closed polygon start → path → end → start (back along the
-    line), cut by the line and measured by the shoelace formula. A lobe on the left is traversed
-    clockwise (forward along the path, back along the line), one on the right anticlockwise."""
-    u = (end - start) / np.linalg.norm(end - start)
-    left = np.array([-u[1], u[0]])
-    poly = np.vstack([start, path, end]) - start
-    a_left = -_shoelace(_clip_half_plane(poly, left))
-    a_right = _shoelace(_clip_half_plane(poly, -left))
-    return a_right, a_left
-
-
 def test_curvature_areas_close_open_paths_like_a_polygon():
     # Measured paths cut at 20 % of peak speed start and end off the line that joins the targets:
     # the closing segments (start target → first sample, last sample → end target) enclose area.
@@ -102,14 +71,14 @@ def test_curvature_areas_close_open_paths_like_a_polygon():
         off = 0.03 * np.sin(np.pi * s / L * (1 + k % 3)) + 0.01 * rng.normal() + 0.004 * rng.normal(size=40)
         path = start + s[:, None] * u + off[:, None] * nrm
         a_r, a_l = (float(v) for v in pj.curvature_areas(path, start, end))
-        ref_r, ref_l = _polygon_areas(path, start, end)
+        ref_r, ref_l = polygon_areas(path, start, end)
         np.testing.assert_allclose([a_r, a_l], [ref_r, ref_l], rtol=1e-10, atol=1e-14)
     # One-sided open path: the area is the whole polygon's shoelace area.
     s = np.linspace(0.1, 0.8, 30) * L
     path = start + s[:, None] * u + (0.02 + 0.05 * np.sin(np.pi * s / L))[:, None] * nrm
     a_r, a_l = pj.curvature_areas(path, start, end)
     assert float(a_r) == 0.0
-    np.testing.assert_allclose(float(a_l), abs(_shoelace(np.vstack([start, path, end]))), rtol=1e-12)
+    np.testing.assert_allclose(float(a_l), abs(shoelace(np.vstack([start, path, end]))), rtol=1e-12)
 
 
 def test_curvature_areas_gradient_matches_central_differences():
