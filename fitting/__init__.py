@@ -29,6 +29,10 @@ from ._ik.weights import ik_model_error as ik_model_error
 from ._optimise import LeastSquaresResult as LeastSquaresResult
 from ._optimise import covariance as covariance
 from ._optimise import least_squares as least_squares
+from ._pointing import PointingAnalysis as PointingAnalysis
+from ._pointing import PointingPrediction as PointingPrediction
+from ._pointing import analyze_pointing as analyze_pointing
+from ._pointing import predict_pointing as predict_pointing
 from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights
@@ -39,3 +43,5 @@ from ._sweep import latin_hypercube as latin_hypercube
 from ._sweep import params_from_csv as params_from_csv
 from ._sweep import sobol as sobol
 from ._sweep import sweep as sweep
+from ._time_constants import TimeConstantFit as TimeConstantFit
+from ._time_constants import fit_time_constants as fit_time_constants

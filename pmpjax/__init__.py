@@ -1,6 +1,7 @@
 """pmpjax: differentiable JAX toolkit for human-like posture and movement of redundant chains."""
 
 from ._analysis.movement import SmoothedPath as SmoothedPath
+from ._analysis.movement import gcv_lambda as gcv_lambda
 from ._analysis.movement import segment_by_speed as segment_by_speed
 from ._analysis.movement import smooth_path as smooth_path
 from ._base.status import Status as Status
@@ -68,8 +69,10 @@ from ._springy_arm.reflexes import run_reflexes as run_reflexes
 from ._springy_arm.reflexes import script_inputs as script_inputs
 from ._springy_arm.reflexes import stack_inputs as stack_inputs
 from ._wrist.center_out import DIRECTIONS as DIRECTIONS
+from ._wrist.center_out import TARGET_RADIUS as TARGET_RADIUS
 from ._wrist.center_out import center_out_targets as center_out_targets
 from ._wrist.center_out import center_out_trials as center_out_trials
+from ._wrist.center_out import target_radius as target_radius
 from ._wrist.curvature import curvature_areas as curvature_areas
 from ._wrist.curvature import curvature_measures as curvature_measures
 from ._wrist.donders import DondersSurface as DondersSurface
@@ -99,6 +102,12 @@ from ._wrist.orientation import rotvec_from_matrix as rotvec_from_matrix
 from ._wrist.orientation import rotvec_from_quat as rotvec_from_quat
 from ._wrist.orientation import torsion_between as torsion_between
 from ._wrist.orientation import wrist_rotation as wrist_rotation
+from ._wrist.pointing import MOVEMENT_LABELS as MOVEMENT_LABELS
+from ._wrist.pointing import PointingRecording as PointingRecording
+from ._wrist.pointing import SyntheticPointing as SyntheticPointing
+from ._wrist.pointing import read_pointing as read_pointing
+from ._wrist.pointing import synthetic_pointing_experiment as synthetic_pointing_experiment
+from ._wrist.pointing import write_pointing as write_pointing
 from ._wrist.subjects import Subject as Subject
 from ._wrist.subjects import load_subject as load_subject
 from ._wrist.subjects import paper_subjects as paper_subjects

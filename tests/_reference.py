@@ -219,3 +219,35 @@ def arm4_jac(q, L1=0.30, L2=0.33):
     """Jacobian of :func:`arm4_fk` by complex steps (exact to rounding)."""
     h = 1e-30
     return np.stack([arm4_fk(np.asarray(q, complex) + 1j * h * e, L1, L2).imag / h for e in np.eye(4)], axis=1)
+
+
+def shoelace(poly):
+    """Signed area of a closed polygon (N, 2) (counter-clockwise positive)."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+
+
+def clip_half_plane(poly, normal):
+    """Sutherland–Hodgman: the part of polygon ``poly`` with ``poly @ normal >= 0``."""
+    out = []
+    n = len(poly)
+    for i in range(n):
+        p, q = poly[i], poly[(i + 1) % n]
+        dp, dq = p @ normal, q @ normal
+        if dp >= 0:
+            out.append(p)
+        if (dp >= 0) != (dq >= 0):
+            out.append(p + (q - p) * dp / (dp - dq))
+    return np.array(out) if out else np.zeros((0, 2))
+
+
+def polygon_areas(path, start, end):
+    """Reference (A_R, A_L): the closed polygon start → path → end → start (back along the
+    line), cut by the line and measured by the shoelace formula. A lobe on the left is traversed
+    clockwise (forward along the path, back along the line), one on the right anticlockwise."""
+    u = (end - start) / np.linalg.norm(end - start)
+    left = np.array([-u[1], u[0]])
+    poly = np.vstack([start, path, end]) - start
+    a_left = -shoelace(clip_half_plane(poly, left))
+    a_right = shoelace(clip_half_plane(poly, -left))
+    return a_right, a_left

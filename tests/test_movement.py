@@ -61,3 +61,29 @@ def test_status_vocabulary():
     assert pj.status_message(np.array([0, 2]))[1] == pj.Status.MAX_STEPS.message
     with pytest.raises(ValueError):
         pj.status_message(99)
+
+
+@pytest.mark.bad_input("pj.gcv_lambda")
+def test_gcv_lambda_matches_scipys_generalised_cross_validation():
+    from scipy.interpolate import make_smoothing_spline
+
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 1.5, 150))  # uneven sampling
+    clean = np.stack([0.2 * np.tanh(6 * (t - 0.7)), 0.05 * np.sin(4 * t)], -1)
+    y = clean + 1.5e-3 * rng.normal(size=clean.shape)
+    lam = pj.gcv_lambda(t, y)
+    assert lam.shape == (2,)
+    for c in range(2):
+        ref = make_smoothing_spline(t, y[:, c])(t)  # SciPy's own GCV choice
+        ours = make_smoothing_spline(t, y[:, c], lam=lam[c])(t)
+        # Same criterion, same minimiser: the fits agree far below the noise (1.5 mm).
+        assert np.max(np.abs(ours - ref)) < 5e-5
+    assert float(pj.gcv_lambda(t, y[:, 0])) == pytest.approx(lam[0], rel=1e-12)
+    with pytest.raises(ValueError, match="`t` must be strictly"):
+        pj.gcv_lambda(t[::-1], y)
+    with pytest.raises(ValueError, match="must agree"):
+        pj.gcv_lambda(t, y[:-1])
+    with pytest.raises(ValueError, match="`y` contains NaN"):
+        pj.gcv_lambda(t, np.full_like(y, np.nan))
+    with pytest.raises(ValueError, match="at least 5"):
+        pj.gcv_lambda(t[:4], y[:4])

@@ -19,10 +19,11 @@ TESTS = Path(__file__).parent
 NOT_ENTRY_POINTS = {
     "pj.ArmEquilibrium", "pj.ArmTrajectory", "pj.Chain", "pj.DIRECTIONS", "pj.DondersSurface",
     "pj.Equilibrium", "pj.FIGURE3", "pj.Planner", "pj.ReflexNetwork", "pj.Status", "pj.SmoothedPath",
-    "pj.Subject", "pj.Trajectory", "pj.HugmpSubject", "pj.DondersRecording",
+    "pj.Subject", "pj.TARGET_RADIUS", "pj.Trajectory", "pj.HugmpSubject", "pj.DondersRecording",
+    "pj.MOVEMENT_LABELS", "pj.PointingRecording", "pj.SyntheticPointing",
     "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",
     "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
-    "fitting.StiffnessFit",
+    "fitting.StiffnessFit", "fitting.PointingAnalysis", "fitting.PointingPrediction", "fitting.TimeConstantFit",
     "fitting.SweepResult",
 }
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -12,16 +13,35 @@ def curvature_areas(path, start, end):
     """Areas between a path and the directed line from ``start`` to ``end`` (Figure 4).
 
     ``path`` (..., S, 2), ``start``/``end`` (..., 2) in task units. Returns ``(A_R, A_L)``
-    (...,), the non-negative raw areas (task units²) enclosed on the right / left of the line,
-    integrating the path's signed distance from the line over arc length along the line, with
-    the path linearly interpolated between samples and split exactly where it crosses the line.
-    Normalise by the squared target distance for the paper's ``A`` values (``curvature_measures``).
+    (...,), the non-negative raw areas (task units²) enclosed on the right / left of the line.
+
+    **Convention (open paths).** The enclosed region is that of the closed polygon
+    ``start → path[0] → … → path[-1] → end → start``: paths that do not begin or end on the line
+    (a measured movement cut at 20 % of peak speed never starts exactly on a target) are closed
+    by the straight segments from ``start`` to the first sample and from the last sample to
+    ``end``, then back along the line. The polygon is split exactly where its edges cross the
+    line; the part on the left of the directed line is ``A_L``, on the right ``A_R`` (a region
+    enclosed several times counts that many times, as for a shoelace area). For the paper's
+    measure, pass the movement's own first and last points as ``start``/``end`` (Figure 4
+    caption: the line joins the movement's start and end); the closing segments then vanish.
+    Normalise by the squared target distance for the paper's ``A`` values
+    (``curvature_measures``). Differentiable in all arguments (except where the line has zero
+    length).
     """
     path = jnp.asarray(as_array("path", path, tail=(None, 2)))
     start = jnp.asarray(as_array("start", start, tail=(2,)))
     end = jnp.asarray(as_array("end", end, tail=(2,)))
     if path.shape[-2] < 2:
         raise ValueError(f"`path` needs at least 2 samples, got shape {path.shape}")
+    return _areas(path, start, end)
+
+
+@jax.jit
+def _areas(path, start, end):
+    lead = jnp.broadcast_shapes(path.shape[:-2], start.shape[:-1], end.shape[:-1])
+    path = jnp.concatenate([jnp.broadcast_to(start, lead + (2,))[..., None, :],
+                            jnp.broadcast_to(path, lead + path.shape[-2:]),
+                            jnp.broadcast_to(end, lead + (2,))[..., None, :]], axis=-2)
     u = end - start
     length = jnp.linalg.norm(u, axis=-1, keepdims=True)
     u = u / length
@@ -41,6 +61,10 @@ def curvature_areas(path, start, end):
 
 
 def curvature_measures(path, start, end, *, scale: float = np.pi / 12):
-    """``A_sum``, ``A_net = A_R − A_L`` normalised by ``scale²`` (paper: (π/12)²) (...,)."""
+    """``A_sum = A_R + A_L``, ``A_net = A_R − A_L`` normalised by ``scale²`` (...,).
+
+    ``scale`` is the nominal target-to-target distance (paper: π/12, the default target radius
+    of ``center_out_targets``). See :func:`curvature_areas` for the convention on open paths.
+    """
     a_r, a_l = curvature_areas(path, start, end)
     return (a_r + a_l) / scale**2, (a_r - a_l) / scale**2

@@ -8,12 +8,13 @@ from .._chains.kinematics import Wrist
 from .._pmp.models import Lambda0PMP, damping_from_stiffness
 from .._pmp.planners import ArimotoPlanner
 from .._pmp.simulate import SaveAt, simulate_sequence
-from .center_out import DIRECTIONS, center_out_targets
+from .center_out import DIRECTIONS, TARGET_RADIUS, center_out_targets
 from .curvature import curvature_measures
 
-#: Figure 3 example (Eq 9): KJ [Nm/rad], q_rest [rad], τ = τ0 [s], k [N/m], T [s].
+#: Figure 3 example (Eq 9): KJ [Nm/rad], q_rest [rad], τ = τ0 [s], k [N/m], T [s], target radius
+#: [m] (the paper's nominal π/12, which also normalises the curvature areas; see ``center_out``).
 FIGURE3 = dict(KJ=np.diag([0.5, 1.5, 2.0]), q_rest=np.deg2rad([5.0, 0.0, 0.0]), tau0=0.08, tau=0.08,
-               k=22.5, duration=0.4)
+               k=22.5, duration=0.4, radius=TARGET_RADIUS)
 
 
 def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
@@ -23,12 +24,12 @@ def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
     ``q_rest`` (which points at the centre) and runs centre → target → centre, ``duration`` each.
     Returns numpy arrays: ``t`` (S,), ``q`` (8, 2, S, 3), ``x`` (8, 2, S, 2), ``speed`` (8, 2, S),
     ``targets`` (8, 2), ``A_sum``/``A_net`` (8, 2) normalised curvature areas (out, in),
-    ``A_hyst`` (8,), and the parameters used.
+    ``A_hyst`` (8,), and the parameters used. The areas are normalised by ``radius²``.
     """
     p = {**FIGURE3, **overrides}
     chain = Wrist(1.0)
     model = Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=damping_from_stiffness(p["KJ"], p["tau0"]))
-    tg = center_out_targets()
+    tg = center_out_targets(p["radius"])
     targets = np.stack([tg[name] for name in DIRECTIONS])
     seqs = np.stack([targets, np.zeros_like(targets)], axis=1)  # (8, 2 movements, 2)
     q0 = np.broadcast_to(np.asarray(p["q_rest"], float), (8, 3))
@@ -36,7 +37,7 @@ def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
                            duration=p["duration"], dt=dt, saveat=SaveAt(every=save_every))
     x = np.asarray(tr.x)
     starts = np.stack([np.zeros_like(targets), targets], axis=1)
-    a_sum, a_net = (np.asarray(v) for v in curvature_measures(x, starts, seqs))
+    a_sum, a_net = (np.asarray(v) for v in curvature_measures(x, starts, seqs, scale=p["radius"]))
     return dict(t=np.asarray(tr.t), q=np.asarray(tr.q), x=x, speed=np.asarray(tr.speed),
                 targets=targets, directions=DIRECTIONS, A_sum=a_sum, A_net=a_net,
                 A_hyst=a_net[:, 0] + a_net[:, 1], status=np.asarray(tr.status), params=p)

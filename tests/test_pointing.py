@@ -1,0 +1,388 @@
+"""Wrist-pointing experiments (issue 11): recording format, synthetic experiment, analysis,
+statistics, Donders-fitted predictions and time constants, each against an independent reference
+(hand-written files, SciPy Rotation, solve_ivp of the NumPy λ0-PMP field, scipy.stats, central
+differences)."""
+
+import numpy as np
+import pytest
+import scipy.integrate
+from _reference import arimoto, pmp_qdot, rx, ry, rz, shoelace, wrist_fk
+from scipy.spatial.transform import Rotation
+
+import fitting
+import pmpjax as pj
+
+HEADER = "subject,trial,time,qw,qx,qy,qz,target"
+
+
+def _quat_np(q):
+    """Scalar-first unit quaternions of Eq 6 postures via SciPy (independent of pmpjax)."""
+    R = np.stack([rx(-a) @ rz(b) @ ry(c) for a, b, c in np.atleast_2d(q)])
+    xyzw = Rotation.from_matrix(R).as_quat()
+    out = xyzw[:, [3, 0, 1, 2]]
+    return np.where(out[:, :1] < 0, -out, out)
+
+
+def _small_recording(rng):
+    rows = []
+    for s in ("alice", "bob"):
+        for trial in (1, 2):
+            n = 40
+            q = 0.2 * rng.normal(size=(n, 3))
+            targets = ["C"] * 10 + ["N"] * 15 + ["C"] * 15
+            rows.append((np.full(n, s), np.full(n, trial), np.arange(n) / 120.0, _quat_np(q), np.array(targets)))
+    cols = [np.concatenate([r[i] for r in rows]) for i in range(5)]
+    return pj.PointingRecording(*cols, d=0.9)
+
+
+def test_pointing_format_round_trips_and_reads_hand_written_files(tmp_path, rng):
+    rec = _small_recording(rng)
+    for suffix in ("csv", "npz"):
+        path = tmp_path / f"rec.{suffix}"
+        pj.write_pointing(path, rec)
+        back = pj.read_pointing(path)
+        assert back.subjects == ("alice", "bob") and back.trials("bob") == (1, 2)
+        for f in ("subject", "trial", "time", "quat", "target"):
+            np.testing.assert_array_equal(getattr(back, f), getattr(rec, f))
+        assert back.d == 0.9 and back.radius == rec.radius and back.source == str(path)
+    # A file written by hand: comments, extra columns in another order, interleaved trials,
+    # lower-case targets. Pointing must follow Eq 6 of the joint angles the quaternions encode.
+    q = np.array([[0.1, 0.2, -0.1], [0.3, -0.1, 0.05], [-0.2, 0.15, 0.2], [0.0, 0.0, 0.1]])
+    quat = _quat_np(q)
+    lines = ["# lab export", "# d=0.8", "target,extra,time,qw,qx,qy,qz,subject,trial"]
+    for i, (qq, trial, t, g) in enumerate(zip(quat, (1, 2, 1, 2), (0.0, 0.0, 0.01, 0.01), ("c", "n", "N", "C"))):
+        lines.append(f"{g},{i * 7},{t}," + ",".join(repr(float(v)) for v in qq) + f",s1,{trial}")
+    path = tmp_path / "hand.csv"
+    path.write_text("\n".join(lines) + "\n")
+    rec = pj.read_pointing(path)
+    assert rec.d == 0.8 and rec.trials("s1") == (1, 2)
+    np.testing.assert_array_equal(rec.rows("s1", 2), [1, 3])
+    np.testing.assert_array_equal(rec.target, ["C", "N", "N", "C"])
+    np.testing.assert_allclose(rec.pointing, np.stack([wrist_fk(v, 0.8) for v in q]), atol=1e-14)
+    np.testing.assert_allclose(pj.joint_angles_from_quat(rec.quat), q, atol=1e-12)
+
+
+def _write(tmp_path, body, name="bad.csv"):
+    path = tmp_path / name
+    path.write_text("# pmpjax pointing v1\n" + HEADER + "\n" + "\n".join(body) + "\n")
+    return path
+
+
+@pytest.mark.bad_input("pj.read_pointing", "pj.write_pointing")
+def test_pointing_reader_is_strict_and_names_file_line_column_subject_trial(tmp_path):
+    ok = ["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,1,0,0,0,N", "s2,4,0.0,1,0,0,0,C", "s2,4,0.1,1,0,0,0,E"]
+    cases = {
+        "nan": (["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,nan,0,0,0,N"],
+                r"bad\.csv:4, column 'qw' \(#4\): subject 's1', trial 1: NaN"),
+        "missing target": (["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,1,0,0,0,"], r":4, column 'target'.*trial 1: missing"),
+        "time": (["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,1,0,0,0,C", "s1,1,0.1,1,0,0,0,N"],
+                 r":5, column 'time'.*subject 's1', trial 1: time not strictly increasing"),
+        "unit": (["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,0.9,0,0,0,N"], r":4, column 'qw'.*not a unit quaternion"),
+        "unknown": (["s1,1,0.0,1,0,0,0,C", "s1,1,0.1,1,0,0,0,Q"], r"unknown target 'Q'"),
+    }
+    for name, (rows, msg) in cases.items():
+        path = _write(tmp_path, rows + ok[2:])
+        with pytest.raises(ValueError, match=msg):
+            pj.read_pointing(path)
+        # on_invalid="skip": the trial is dropped with a warning and reported; the rest is read.
+        with pytest.warns(UserWarning, match="skipping trial"):
+            rec = pj.read_pointing(path, on_invalid="skip")
+        assert rec.subjects == ("s2",) and len(rec.skipped) == 1 and rec.skipped[0][:2] == ("s1", 1)
+        assert "bad.csv:" in rec.skipped[0][2]
+    structural = {
+        "x": (["s1,1,zero,1,0,0,0,C"], r"bad\.csv:3, column 'time' \(#3\): expected a number, got 'zero'"),
+        "trial": (["s1,one,0.0,1,0,0,0,C"], r":3, column 'trial'.*expected an integer"),
+        "fields": (["s1,1,0.0,1,0,0,C"], r":3: expected 8 fields, got 7"),
+        "subject": ([",1,0.0,1,0,0,0,C"], r"column 'subject'.*empty subject"),
+    }
+    for rows, msg in structural.values():
+        with pytest.raises(ValueError, match=msg):
+            pj.read_pointing(_write(tmp_path, rows), on_invalid="skip")
+    p = tmp_path / "nohead.csv"
+    p.write_text("subject,trial,time,qw,qx,qy,target\ns1,1,0,1,0,0,C\n")
+    with pytest.raises(ValueError, match=r"nohead\.csv:1: header .* lacks column\(s\) \['qz'\]"):
+        pj.read_pointing(p)
+    p.write_text("# d=one\n" + HEADER + "\n")
+    with pytest.raises(ValueError, match=r"nohead\.csv:1: bad comment"):
+        pj.read_pointing(p)
+    p.write_text("# only comments\n")
+    with pytest.raises(ValueError, match="empty file"):
+        pj.read_pointing(p)
+    with pytest.raises(ValueError, match="no such file"):
+        pj.read_pointing(tmp_path / "missing.csv")
+    with pytest.raises(ValueError, match=r"\.csv or \.npz"):
+        pj.read_pointing(p.with_suffix(".txt").write_text("x") and p.with_suffix(".txt"))
+    with pytest.raises(ValueError, match="on_invalid"):
+        pj.read_pointing(p, on_invalid="ignore")
+    z = tmp_path / "bad.npz"
+    np.savez(z, subject=np.array(["a"]), trial=np.array([1]), time=np.array([0.0]),
+             format=np.array("pmpjax pointing v1"))
+    with pytest.raises(ValueError, match=r"bad\.npz: missing array\(s\) \['qw'"):
+        pj.read_pointing(z)
+    np.savez(z, format=np.array("other v9"))
+    with pytest.raises(ValueError, match="unknown format"):
+        pj.read_pointing(z)
+    rec = pj.read_pointing(_write(tmp_path, ok))
+    with pytest.raises(ValueError, match=r"\.csv or \.npz"):
+        pj.write_pointing(tmp_path / "out.json", rec)
+    with pytest.raises(TypeError, match="PointingRecording"):
+        pj.write_pointing(tmp_path / "out.csv", {"time": [0.0]})
+    with pytest.raises(ValueError, match="`quat` must have shape"):
+        pj.PointingRecording(["a"], [1], [0.0], [[1.0, 0, 0]], ["C"])
+    with pytest.raises(ValueError, match="`trial` must hold integers"):
+        pj.PointingRecording(["a"], [1.5], [0.0], [[1.0, 0, 0, 0]], ["C"])
+
+
+# --- synthetic experiment ---------------------------------------------------------------------
+
+SUBJECTS = ("subj1", "subj4")
+N_TRIALS = 3
+
+
+@pytest.fixture(scope="module")
+def experiment(tmp_path_factory):
+    """2 Table subjects × 3 trials × 16 movements, τ0 = 0.3 T, τ = 0.12 T (not the paper's T/5),
+    mild trial-to-trial variability, written as CSV and read back (shared by the tests below)."""
+    out = tmp_path_factory.mktemp("pointing")
+    ex = pj.synthetic_pointing_experiment(out, subjects=SUBJECTS, n_trials=N_TRIALS, tau0_ratio=0.3, tau_ratio=0.12,
+                                          duration_jitter=0.03, param_jitter=0.03, n_donders=200, seed=3)
+    return ex, pj.read_pointing(ex.files["pointing"])
+
+
+def _eq10_gain(q0, KJ, W):
+    J = np.array([[*row] for row in _jac_np(q0)])
+    B = np.linalg.inv(J @ np.linalg.inv(W) @ J.T)
+    return np.linalg.eigvalsh(B)[-1] / (W[0, 0] / KJ[0, 0])
+
+
+def _jac_np(q, h=1e-7):
+    return np.stack([(wrist_fk(q + h * e) - wrist_fk(q - h * e)) / (2 * h) for e in np.eye(3)], axis=1)
+
+
+def reference_movement(KJ, q_rest, tau0, tau, q0, target, t_eval):
+    """The λ0-PMP movement by solve_ivp (DOP853, rtol 1e-10) of the NumPy field of _reference,
+    with Eq 10's gain from the start posture: screen points (len(t_eval), 2)."""
+    W = tau0 * KJ
+    k = _eq10_gain(q0, KJ, W)
+    gain = arimoto(k, tau)
+    sol = scipy.integrate.solve_ivp(lambda t, q: pmp_qdot(q, t, target, KJ, q_rest, W, gain), (0.0, t_eval[-1]),
+                                    q0, t_eval=t_eval, method="DOP853", rtol=1e-10, atol=1e-12)
+    return np.stack([wrist_fk(q) for q in sol.y.T])
+
+
+def test_synthetic_experiment_samples_the_lambda0_pmp_at_120_hz(experiment):
+    ex, rec = experiment
+    tr = ex.truth
+    assert rec.subjects == SUBJECTS and rec.trials("subj4") == (1, 2, 3)
+    assert ex.donders.subjects == SUBJECTS and ex.donders.quat.shape == (2, 200, 4)
+    for s, k, j in [(0, 0, 0), (0, 2, 7), (1, 1, 12), (1, 2, 15)]:
+        rows = rec.rows(SUBJECTS[s], k + 1)
+        t = rec.time[rows]
+        np.testing.assert_allclose(np.diff(t), 1 / 120, rtol=1e-9)
+        # The target column follows the trial's order: out to X, back to C, ...
+        cues = np.flatnonzero(rec.target[rows][1:] != rec.target[rows][:-1]) + 1
+        shown = [str(rec.target[rows][c]) for c in cues]
+        labels = [pj.MOVEMENT_LABELS[i] for i in tr["trial_label"][s, k]]
+        assert shown == [lab.split("-")[1] if lab.startswith("out") else "C" for lab in labels]
+        # Samples of movement j against an independent solve_ivp of the same movement.
+        t0 = tr["onset"][s, k, j]
+        T = tr["trial_T"][s, k, j]
+        win = (t >= t0) & (t <= t0 + 1.5 * T)
+        ref = reference_movement(tr["KJ"][s], tr["q_rest"][s], tr["trial_tau0"][s, k, j], tr["trial_tau"][s, k, j],
+                                 tr["trial_q0"][s, k, j], tr["trial_target"][s, k, j], t[win] - t0)
+        err = rec.pointing[rows][win] - ref
+        # IMU noise 0.1° RMS rotation: ≈ 1.0 mm RMS per screen axis; a wrong time scale errs by cm.
+        assert np.sqrt(np.mean(err**2)) < 1.3e-3 and np.max(np.abs(err)) < 6e-3
+
+
+@pytest.mark.bad_input("pj.synthetic_pointing_experiment")
+def test_synthetic_experiment_rejects_bad_options():
+    with pytest.raises(ValueError, match="`subjects`: unknown subject 'subj9'"):
+        pj.synthetic_pointing_experiment(subjects=["subj9"])
+    with pytest.raises(ValueError, match="`T` must be a scalar"):
+        pj.synthetic_pointing_experiment(subjects=[1, 2], T=np.ones(3))
+    with pytest.raises(ValueError, match="`tau0_ratio` must be positive"):
+        pj.synthetic_pointing_experiment(tau0_ratio=-0.2)
+    with pytest.raises(ValueError, match="`imu_noise_deg` must be >= 0"):
+        pj.synthetic_pointing_experiment(imu_noise_deg=np.nan)
+    with pytest.raises(ValueError, match="`n_trials`"):
+        pj.synthetic_pointing_experiment(n_trials=0)
+    with pytest.raises(ValueError, match="`fmt`"):
+        pj.synthetic_pointing_experiment(fmt="xlsx")
+    with pytest.raises(ValueError, match="`radius`"):
+        pj.synthetic_pointing_experiment(radius=0.0)
+
+
+# --- analysis on hand-made recordings with known curvature (no simulator involved) ------------
+
+RADIUS = np.pi / 12
+RATE = 120.0
+MOVE = 0.5  # s, minimum-jerk duration of every hand-made movement
+
+
+def _screen_quat(x, noise_deg, rng):
+    """Quaternions of the postures with q_PS = 0 pointing at ``x`` (N, 2) (Eq 6: x1 = −sin q_FE
+    cos q_RUD, x2 = −sin q_RUD at d = 1), seen through random IMU rotations (SciPy)."""
+    c = -np.arcsin(x[:, 1])
+    b = np.arcsin(-x[:, 0] / np.cos(c))
+    R = np.stack([rx(0.0) @ rz(bb) @ ry(cc) for bb, cc in zip(b, c)])
+    eps = np.deg2rad(noise_deg) / np.sqrt(3) * rng.normal(size=(len(x), 3))
+    xyzw = Rotation.from_matrix(R @ Rotation.from_rotvec(eps).as_matrix()).as_quat()
+    return xyzw[:, [3, 0, 1, 2]]
+
+
+def _bowed(p0, p1, amp, sigma):
+    """Path from p0 to p1 bowed by ``amp·sin(πσ)`` to the left of its direction."""
+    u = p1 - p0
+    left = np.array([-u[1], u[0]]) / np.linalg.norm(u)
+    return p0 + sigma[:, None] * u + amp * np.sin(np.pi * sigma)[:, None] * left
+
+
+def _minjerk(tau):
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10 - 15 * tau + 6 * tau**2)
+
+
+def _handmade_trial(order, amp, rng, *, noise_deg=0.05, still=(), slow=1.0):
+    """One trial: rest on C, then for each direction the cue, 0.3 s rest, a 0.5·``slow`` s
+    minimum-jerk bowed movement out, 0.4 s hold, the cue for C, the same back. ``still``:
+    directions whose out and in movements never happen (the hand stays on the centre)."""
+    tg = pj.center_out_targets()
+    t_all, x_all, names = [np.arange(0.0, 0.5, 1 / RATE)], [np.zeros((60, 2))], [["C"] * 60]
+    t0, pos = 0.5, np.zeros(2)
+    for d in order:
+        for dest, name in ((tg[d], d), (tg["C"], "C")):
+            epoch = 0.7 + MOVE * slow
+            t = t0 + np.arange(0.0, epoch - 1e-9, 1 / RATE)
+            sig = _minjerk((t - t0 - 0.3) / (MOVE * slow))
+            path = np.repeat(pos[None], t.size, 0) if d in still else _bowed(pos, dest, amp, sig)
+            t_all.append(t)
+            x_all.append(path)
+            names.append([name] * t.size)
+            t0, pos = t0 + t.size / RATE, (pos if d in still else dest)
+    x = np.concatenate(x_all)
+    return np.concatenate(t_all), _screen_quat(x, noise_deg, rng), np.concatenate(names)
+
+
+def handmade_recording(spec, *, seed=0, source="handmade.csv"):
+    """``spec``: {subject: [(amp, kwargs), ...] one per trial} -> PointingRecording."""
+    rng = np.random.default_rng(seed)
+    cols = {k: [] for k in ("subject", "trial", "time", "quat", "target")}
+    for subj, trials in spec.items():
+        for k, (amp, kw) in enumerate(trials, 1):
+            order = kw.pop("order", pj.DIRECTIONS)
+            t, q, g = _handmade_trial(order, amp, rng, **kw)
+            for key, v in zip(cols, (np.full(t.size, subj), np.full(t.size, k), t, q, g)):
+                cols[key].append(v)
+    return pj.PointingRecording(*(np.concatenate(v) for v in cols.values()), source=source)
+
+
+def reference_a_net(amp, p0, p1, threshold=0.2):
+    """A_net and A_sum of the bowed minimum-jerk movement cut at ``threshold`` of peak speed,
+    line through the cut path's ends, by polygon areas; and the exact duration between the
+    crossings. The cut is widened by half a sample at each end, where the paper's sample-level
+    cut lies on average."""
+    t = np.linspace(0.0, MOVE, 48_001)
+    x = _bowed(p0, p1, amp, _minjerk(t / MOVE))
+    v = np.linalg.norm(np.gradient(x, t, axis=0), axis=1)
+    on, off = np.flatnonzero(v >= threshold * v.max())[[0, -1]]
+    half = int(round(0.5 / RATE / (t[1] - t[0])))
+    seg = x[on - half:off + half + 1]
+    # One lobe on one side: the closed polygon's shoelace area is A_R − A_L (a left lobe runs
+    # clockwise: forward along the path, back along the line).
+    u = seg[-1] - seg[0]
+    side = u[0] * (seg[:, 1] - seg[0, 1]) - u[1] * (seg[:, 0] - seg[0, 0])
+    assert np.all(side >= -1e-15) or np.all(side <= 1e-15)
+    net = shoelace(seg)
+    return net / RADIUS**2, abs(net) / RADIUS**2, t[off] - t[on]
+
+
+@pytest.fixture(scope="module")
+def handmade():
+    spec = {"curved": [(0.012, {}) for _ in range(5)], "straight": [(0.0, {}) for _ in range(5)]}
+    rec = handmade_recording(spec)
+    # Identical movements make the inter-quartile range ~0: the paper's outlier rule is off here
+    # (iqr=inf) and tested with varied durations below.
+    return rec, fitting.analyze_pointing(rec, iqr=np.inf)
+
+
+def test_analysis_recovers_known_curvature_and_the_papers_t_tests(handmade):
+    rec, an = handmade
+    assert an.subjects == ("curved", "straight") and an.labels[:4] == ("out-N", "in-N", "out-NE", "in-NE")
+    assert not an.excluded and an.valid.all() and an.rate == pytest.approx(RATE)
+    tg = pj.center_out_targets()
+    for j, lab in enumerate(an.labels):
+        way, d = lab.split("-")
+        p0, p1 = (tg["C"], tg[d]) if way == "out" else (tg[d], tg["C"])
+        net, tot, dur = reference_a_net(0.012, p0, p1)
+        # Bowed to the left of its own direction: A_net < 0, |A_net| = A_sum (one lobe).
+        assert net < -0.02 and abs(tot + net) < 1e-12
+        np.testing.assert_allclose(np.mean(an.a_net[0, j]), net, rtol=0.02)
+        np.testing.assert_allclose(np.mean(an.a_sum[0, j]), tot, rtol=0.02)
+        assert np.all(np.abs(an.a_net[1, j]) < 0.003)
+        # Sample-level cut: each end lies up to one sample (on average half) outside the crossing.
+        assert np.all((an.duration[:, j] >= dur) & (an.duration[:, j] <= dur + 2 / RATE))
+        np.testing.assert_allclose(an.path_length[0, j], np.linalg.norm(p1 - p0), rtol=0.05)
+    # The four t-tests against a direct SciPy computation on the reported areas.
+    for s in range(2):
+        for j in range(16):
+            assert an.p_sum[s, j] == pytest.approx(scipy.stats.ttest_1samp(an.a_sum[s, j], 0).pvalue, rel=1e-12)
+            assert an.p_net[s, j] == pytest.approx(scipy.stats.ttest_1samp(an.a_net[s, j], 0).pvalue, rel=1e-12)
+        for i, d in enumerate(pj.DIRECTIONS):
+            hyst = an.a_net[s, an.labels.index(f"out-{d}")] + an.a_net[s, an.labels.index(f"in-{d}")]
+            assert an.p_hyst[s, i] == pytest.approx(scipy.stats.ttest_1samp(hyst, 0).pvalue, rel=1e-12)
+    # Curved: every test rejects (out and in lobes on opposite sides: hysteresis). Straight: the
+    # null holds, so rejections are chance only (P(> 3 of 16 at α = 0.05) < 1 %).
+    assert np.all(an.p_sum[0] < 1e-3) and np.all(an.p_net[0] < 1e-3) and np.all(an.p_hyst[0] < 1e-3)
+    assert np.sum(an.p_net[1] < 0.05) <= 3 and np.sum(an.p_hyst[1] < 0.05) <= 2
+    assert "out-N" in an.table() and "*" in an.table("curved")
+
+
+@pytest.mark.bad_input("fitting.analyze_pointing")
+def test_analysis_skips_bad_trials_names_them_and_goes_on():
+    spec = {
+        "ok": [(0.012, {"slow": f}) for f in (0.9, 0.95, 1.0, 1.05, 1.1, 2.0)],  # the last: a duration outlier
+        "lazy": [(0.012, {}), (0.012, {"still": ("N",)}), (0.012, {})],  # never leaves the centre
+        "gappy": [(0.012, {}), (0.012, {"order": [d for d in pj.DIRECTIONS if d != "NE"]}), (0.012, {})],
+        "solo": [(0.012, {})],  # a single trial: no statistics
+        "broken": [(0.012, {}) for _ in range(4)],
+    }
+    rec = handmade_recording(spec, source="lab/session3.csv")
+    rows = {k: rec.rows("broken", k) for k in (1, 2, 3)}
+    time, quat = rec.time.copy(), rec.quat.copy()
+    quat[rows[1][50]] = np.nan  # NaN sample
+    time[rows[2][400]] = time[rows[2][399]]  # non-monotonic time
+    quat[rows[3][700]] *= 1.5  # non-unit quaternion
+    bad = pj.PointingRecording(rec.subject, rec.trial, time, quat, rec.target, source=rec.source)
+    with pytest.warns(UserWarning) as caught:
+        an = fitting.analyze_pointing(bad)
+    msgs = [str(w.message) for w in caught]
+    for trial, what in ((1, "NaN"), (2, "time not strictly"), (3, "not a unit")):
+        assert any("lab/session3.csv, row " in m and f"subject 'broken', trial {trial}: {what}" in m for m in msgs)
+    reasons = {(e[0], e[1], e[2]): e[3] for e in an.excluded}
+    assert "subject 'broken', trial 2: time not strictly increasing" in reasons[("broken", 2, None)]
+    assert "not a unit quaternion" in reasons[("broken", 3, None)]
+    assert reasons[("lazy", 2, "out-N")].startswith("lab/session3.csv: subject 'lazy', trial 2, out-N: never left")
+    assert "never left the start target" in reasons[("lazy", 2, "in-N")]
+    assert "target NE never shown" in reasons[("gappy", 2, "out-NE")]
+    assert "no statistics" in reasons[("solo", None, "out-N")]
+    # The rest goes on: every other movement is analysed, NaN exactly where excluded.
+    s = {name: an.subjects.index(name) for name in an.subjects}
+    assert an.valid[s["ok"], :, :5].all() and not an.valid[s["ok"], :, 5].any()
+    assert "duration 0.75 s beyond 2 IQR" in reasons[("ok", 6, "out-SW")]
+    assert an.valid[s["broken"], :, 0].all()
+    assert tuple(an.trials[s["broken"]]) == (4, -1, -1, -1, -1, -1) and not an.valid[s["broken"], :, 1:].any()
+    assert an.n_valid[s["lazy"], an.labels.index("out-N")] == 2 and np.isnan(an.a_net[s["lazy"], 0, 1])
+    assert np.isfinite(an.p_net[s["lazy"]]).all() and np.isnan(an.p_net[s["solo"]]).all()
+    assert np.isfinite(an.a_net[s["solo"], :, 0]).all()  # measured, just too few for a t-test
+    assert np.isnan(an.a_net[s["gappy"], an.labels.index("in-NE"), 1])
+    with pytest.raises(TypeError, match="`recording` must be a pmpjax.PointingRecording"):
+        fitting.analyze_pointing({"time": [0.0]})
+    with pytest.raises(ValueError, match="`threshold`"):
+        fitting.analyze_pointing(rec, threshold=1.2)
+    with pytest.raises(ValueError, match="`n_samples`"):
+        fitting.analyze_pointing(rec, n_samples=1)
+    with pytest.raises(ValueError, match="`iqr`"):
+        fitting.analyze_pointing(rec, iqr=-1)
+    with pytest.raises(ValueError, match="`subject`"):
+        an.subject_index("nobody")
