@@ -5,8 +5,9 @@ chunk of ``chunk_size`` parameter rows is one call of one compiled kernel (the l
 padded by repeating its last row, so every call has the same shape and there is exactly one
 compilation); the kernel is ``jit(shard_map(vmap(fn)))`` over the local devices (rows split
 evenly; on a CPU ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` gives two devices), or,
-with ``client=``, one Dask task per chunk on the cluster's workers. Chunks are dispatched one
-ahead, so the store writes the previous chunk while the next one computes.
+with ``client=``, one Dask task per chunk on the cluster's workers. Chunks are dispatched two
+ahead, so the store writes a finished chunk while the next ones compute (memory: at most three
+chunks of ``fn``'s intermediates at once).
 
 **Store** (``out=``), a directory::
 
@@ -231,6 +232,11 @@ def _trace(fn, numeric):
             f"`fn` is not jit-able (it must be a pure JAX function of one parameter row): {type(e).__name__}: "
             f"{str(e).splitlines()[0]}"
         ) from e
+    except KeyError as e:
+        raise ValueError(
+            f"`fn` raised KeyError({e.args[0]!r}) on a parameter row; the row holds the numeric columns "
+            f"{sorted(numeric)} (string columns are labels and are not passed to `fn`)"
+        ) from e
     leaves, treedef = jax.tree_util.tree_flatten_with_path(shapes)
     if not leaves:
         raise TypeError("`fn` must return a pytree of arrays; it returned no arrays")
@@ -397,12 +403,14 @@ class _Store:
 
 
 class _LocalEngine:
-    """One compiled ``jit(shard_map(vmap(fn)))`` over the local devices; chunks dispatched one ahead.
+    """One compiled ``jit(shard_map(vmap(fn)))`` over the local devices; chunks dispatched ahead.
 
     Kernels are kept per (computation, devices, chunk length), so sweeps of the same ``fn`` with
     other parameters (or a restart in the same process) reuse the compilation."""
 
     _kernels: collections.OrderedDict = collections.OrderedDict()
+    #: chunks dispatched beyond the one being stored (XLA's CPU client may run them concurrently)
+    ahead = 2
 
     def __init__(self, fn, devices, chunk_rows, kernel_key):
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
@@ -431,8 +439,8 @@ class _LocalEngine:
         pending = collections.deque()
         for k in todo:
             args = jax.device_put(chunk_params(k, self.length), self.sharding)
-            pending.append((k, self.kernel(args)))  # asynchronous: runs while the previous chunk is stored
-            if len(pending) > 1:
+            pending.append((k, self.kernel(args)))  # asynchronous: runs while earlier chunks are stored
+            if len(pending) > self.ahead:
                 k0, o = pending.popleft()
                 done(k0, [np.asarray(a) for a in jax.device_get(jax.tree_util.tree_leaves(o))])
         while pending:

@@ -42,9 +42,10 @@ def tiny_numpy(a, b):
 
 
 def slow(p):
-    """tiny + 0.15 s per chunk (a host callback), so a run can be killed between chunks."""
+    """tiny + a pause per chunk (a host callback; $SWEEP_TEST_PAUSE seconds, read when it runs, so
+    only the process to be killed pauses), so that a run can be killed between chunks."""
     def wait(a):
-        time.sleep(0.15)
+        time.sleep(float(os.environ.get("SWEEP_TEST_PAUSE", "0")))
         return a
 
     a = jax.pure_callback(wait, jax.ShapeDtypeStruct(p["a"].shape, p["a"].dtype), p["a"], vmap_method="expand_dims")
@@ -116,10 +117,10 @@ def killed_run(tmp_path_factory):
     print("2 devices OK", flush=True)
     fitting.sweep(slow, PARAMS, chunk_size=2, out={str(out)!r}, devices=2, progress=False)
     """
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "SWEEP_TEST_PAUSE": "0.4"}
     proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(script)], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
+    deadline = time.time() + 900  # only a guard: a loaded machine can take minutes to start and compile
     while len(_shards(out) if (out / "chunks").exists() else {}) < 2:
         if proc.poll() is not None:
             pytest.fail(f"the sweep process ended before it was killed: {proc.stderr.read()[-3000:]}")
@@ -334,6 +335,8 @@ def test_sweep_bad_input_raises_before_any_work(tmp_path):
 
     with pytest.raises(TypeError, match="`fn` is not jit-able"):
         fitting.sweep(branches, PARAMS, chunk_size=2, out=out)
+    with pytest.raises(ValueError, match=r"KeyError\('c'\).*\['a', 'b'\]"):
+        fitting.sweep(lambda p: p["c"], {**PARAMS, "name": np.array(["x"] * 24)}, chunk_size=2, out=out)
     with pytest.raises(TypeError, match="`fn` must be callable"):
         fitting.sweep("tiny", PARAMS, chunk_size=2, out=out)
     with pytest.raises(ValueError, match="`chunk_size`"):
