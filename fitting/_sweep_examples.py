@@ -42,7 +42,7 @@ def curvature_row(p, *, duration: float = 0.4, dt: float = 1e-3, tau: float = 0.
                      duration=duration, dt=dt)
     a_sum, a_net = pj.curvature_measures(tr.x, np.zeros((8, 2)), TARGETS)
     # simulate's codes: 0 ok, 1 non-finite, else singular (mapped onto the Status vocabulary)
-    status = jnp.where(tr.status == 0, 0, jnp.where(tr.status == 1, int(Status.NONFINITE), int(Status.SINGULAR)))
+    status = tr.status  # already pmpjax.Status codes
     return {"A_net": a_net, "A_sum": a_sum, "status": status}
 
 

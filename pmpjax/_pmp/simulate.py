@@ -12,13 +12,14 @@ import numpy as np
 
 from .._base.linalg import det, mm, mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
+from .._base.status import Status
 from .._base.validate import as_array, check_positive_int, is_concrete
 from .integrate import integrate
 from .models import _PMP
 from .planners import Planner
 from .redundancy import admittance_terms_soa
 
-OK, NONFINITE, SINGULAR = 0, 1, 2
+OK, NONFINITE, SINGULAR = Status.SUCCESSFUL, Status.NONFINITE, Status.SINGULAR
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,8 +49,9 @@ class SaveAt:
 class Trajectory:
     """Saved states. ``t`` (S,) [s] from the start of each movement; ``q`` (..., S, n) [rad];
     ``x`` (..., S, m); ``qdot`` (..., S, n); ``xdot`` (..., S, m); ``manipulability`` (..., S)
-    (``sqrt(det J Jᵀ)``); ``status`` (...,) int: 0 ok, 1 non-finite, 2 passed within
-    ``singular_tol`` of a rank-deficient Jacobian. Sequences add an (M,) axis before S.
+    (``sqrt(det J Jᵀ)``); ``status`` (...,) int, a :class:`pmpjax.Status` code: ``SUCCESSFUL``,
+    ``NONFINITE``, or ``SINGULAR`` (passed within ``singular_tol`` of a rank-deficient
+    Jacobian). Sequences add an (M,) axis before S.
     """
 
     t: jax.Array
@@ -185,7 +187,10 @@ def simulate_sequence(
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
     if is_concrete(model, planner, q0):
-        _check_stability(model, planner, q0, batch, max(sched.hs))
+        # Concrete inputs inside a caller's jit/vmap/grad: evaluate the check eagerly instead of
+        # tracing it (its jitted rate estimate would otherwise return tracers).
+        with jax.ensure_compile_time_eval():
+            _check_stability(model, planner, q0, batch, max(sched.hs))
     out = _run(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs),
                batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
                singular_tol=float(singular_tol))
@@ -246,7 +251,7 @@ def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initia
     back = lambda a: jnp.moveaxis(a, -1, 0).reshape(batch + a.shape[:-1])  # noqa: E731
     fin = jnp.all(jnp.isfinite(qs), axis=(0, 1, 2)) & jnp.all(jnp.isfinite(qT), axis=0)
     sing = jnp.min(jnp.where(jnp.isfinite(ws), ws, 0.0), axis=(0, 1)) < singular_tol
-    status = jnp.where(~fin, NONFINITE, jnp.where(sing, SINGULAR, OK)).reshape(batch)
+    status = jnp.where(~fin, int(NONFINITE), jnp.where(sing, int(SINGULAR), int(OK))).reshape(batch)
     return Trajectory(
         t=t0s, q=back(qs), x=back(xs), qdot=back(qds), xdot=back(xds),
         manipulability=jnp.moveaxis(ws, -1, 0).reshape(batch + ws.shape[:-1]), status=status,
