@@ -39,12 +39,19 @@ the machine shared with six other sessions: load average 14.9 at the start, 18.1
     the warm-up; outputs 2.4 / 24 MB): flat apart from the outputs themselves
     no failed rows; mean |A_net| 0.040
 
-Reading: the same sweep's ratio against its bare kernel was 1.34 on 1 device and 0.92 on 2
-devices, i.e. the run-to-run spread under this load (±20 %) is larger than the engine's own cost,
-which is a ``device_put`` of the chunk's parameters, a ``device_get`` of its outputs and one
-fsync'd write of ~0.4 MB per ~5 s chunk (< 1 %), with chunks dispatched ahead so that writes
-overlap compute. The < 10 % overhead target could not be confirmed or refuted on this loaded
-machine; ``--overhead`` (interleaved repeats, min) is the measurement to repeat on a quiet one.
+Overhead, measured properly (``--overhead --movements 100000 --repeats 2``: bare kernel, sweep
+in memory, sweep + store interleaved, min of 2 each; 2026-12-01 18:33-18:52 UTC, load 15-21;
+chunks dispatched two ahead)::
+
+    devices   bare kernel   sweep, in memory   sweep + NPZ store
+    1          36.26 s       36.90 s (1.018)    39.36 s (1.085)
+    2          57.29 s       55.22 s (0.964)    53.88 s (0.940)
+
+Reading: with interleaved repeats the store and engine cost 2-9 % on 1 device (target < 10 %:
+met) and nothing measurable on 2 devices; the single runs of the 10^6 table (one chunk dispatched
+ahead then, and no repeats) swung from 0.82 to 1.34 with the load, i.e. that table's ratios are
+noise. The engine's own work per ~5 s chunk is a ``device_put`` of the parameters, a
+``device_get`` of the outputs and one fsync'd ~0.4 MB write, overlapped with the chunks in flight.
 2 devices gave no clear gain here (the loaded machine had no idle core to give); the Dask run,
 last and under the highest load, is 2.1x the 1-device bare kernel.
 """
