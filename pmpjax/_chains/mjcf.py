@@ -18,6 +18,7 @@ import numpy as np
 
 from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
+from .._base.validate import is_concrete
 from .kinematics import Chain
 
 _HINGE = 3  # mujoco.mjtJoint.mjJNT_HINGE
@@ -115,13 +116,45 @@ def gravity_terms(mx, q):
 def site_jacobian(mx, site_id: int, q):
     """Site position ``x`` (3,) and translational Jacobian ``J`` (3, nv) at ``q`` from one MJX
     kinematics pass (as ``mj_jacSite``): column j is ``a_j × (x − p_j)`` for a hinge moving the
-    site, ``a_j`` for a slide, 0 otherwise."""
+    site, ``a_j`` for a slide, 0 otherwise. Differentiable in ``q`` by a closed-form JVP (below),
+    so derivatives never trace MJX kinematics (small compile times)."""
+    return _site_jac(int(site_id), mx, q)
+
+
+def _site_jac_terms(mx, site_id: int, q):
     with jax.numpy_rank_promotion("allow"):
         d = kinematics(mx, q)
         x = d.site_xpos[site_id]
         moves = _subtree_mask(mx)[:, int(np.asarray(mx.site_bodyid)[site_id])][:, None]
         cols = jnp.where(_is_hinge(mx), jnp.cross(d.xaxis, x[None, :] - d.xanchor), d.xaxis)
-        return x, (moves * cols).T
+        return x, moves, cols, d
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _site_jac(site_id, mx, q):
+    x, moves, cols, _ = _site_jac_terms(mx, site_id, q)
+    return x, (moves * cols).T
+
+
+@_site_jac.defjvp
+def _site_jac_jvp(site_id, primals, tangents):
+    # Rigid-body velocities of the frames for joint rates dq (the model's tangents are ignored):
+    # frame j turns at ω_j = Σ_i R_ij h_i a_i dq_i (R_ij: joint i moves joint j; h_i: hinge), a
+    # point y on it moves at Σ_i R_ij (h_i a_i × (y − p_i) + (1 − h_i) a_i) dq_i. Then
+    # d(a_j × (x − p_j)) = (ω_j × a_j) × (x − p_j) + a_j × (dx − dp_j) and d(a_j) = ω_j × a_j.
+    mx, q = primals
+    dq = tangents[1]
+    x, moves, cols, d = _site_jac_terms(mx, site_id, q)
+    with jax.numpy_rank_promotion("allow"):
+        A, Pn = d.xaxis, d.xanchor
+        h = jnp.asarray(_is_hinge(mx)[:, 0], A.dtype)
+        Rt = jnp.asarray(_moves_joint(mx).T, A.dtype)  # Rt[j, i] = R[i, j]
+        dx = (moves[:, 0] * dq) @ cols
+        omega = Rt @ ((h * dq)[:, None] * A)
+        dp = jnp.cross(omega, Pn) - Rt @ ((h * dq)[:, None] * jnp.cross(A, Pn)) + Rt @ (((1 - h) * dq)[:, None] * A)
+        da = jnp.cross(omega, A)
+        dcols = jnp.where(h[:, None] > 0, jnp.cross(da, x[None, :] - Pn) + jnp.cross(A, dx[None, :] - dp), da)
+        return (x, (moves * cols).T), (dx, (moves * dcols).T)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
@@ -142,11 +175,41 @@ def site_position(mx, site_id: int, q):
     return _site_pos(int(site_id), mx, q)
 
 
-@functools.partial(jax.jit, static_argnums=(1,))
-def _site_jacobians(mx, site_id: int, q):
-    """Site positions (B, 3) and Jacobians (B, 3, nv) at postures ``q`` (B, nv); jitted, so eager
-    calls compile one kinematics pass per shape instead of dispatching it op by op."""
+_EAGER_CHUNK = 64
+
+
+def _map_rows(kernel, mx, q):
+    """``kernel(mx, q (B, n))`` (a jitted, vmapped function) over rows of ``q``. Concrete (eager)
+    calls run it on chunks of 64 rows, so every batch size shares one compile; traced calls
+    (inside ``jit``/``grad``/``vmap``) run it once on the whole batch (inlined)."""
+    if not is_concrete(q):
+        return kernel(mx, q)
+    B = q.shape[0]
+    Bp = -(-B // _EAGER_CHUNK) * _EAGER_CHUNK
+    qp = jnp.concatenate([q, jnp.broadcast_to(q[:1], (Bp - B,) + q.shape[1:])]) if Bp > B else q
+    parts = [kernel(mx, qp[i : i + _EAGER_CHUNK]) for i in range(0, Bp, _EAGER_CHUNK)]
+    return jax.tree_util.tree_map(lambda *p: jnp.concatenate(p)[:B], *parts)
+
+
+@functools.partial(jax.jit, static_argnames=("site_id",))
+def _site_jacobians_kernel(mx, q, *, site_id: int):
     return jax.vmap(lambda qq: site_jacobian(mx, site_id, qq))(q)
+
+
+@jax.jit
+def _gravity_kernel(mx, q):
+    return jax.vmap(lambda qq: gravity_gradient(mx, qq))(q)
+
+
+def site_jacobians(mx, site_id: int, q):
+    """Site positions (B, 3) and Jacobians (B, 3, nv) at postures ``q`` (B, nv) (see
+    :func:`_map_rows`: one compile for every eager batch size)."""
+    return _map_rows(functools.partial(_site_jacobians_kernel, site_id=int(site_id)), mx, q)
+
+
+def gravity_gradients(mx, q):
+    """``∇V`` (B, nv) at postures ``q`` (B, nv) (see :func:`gravity_gradient`, :func:`_map_rows`)."""
+    return _map_rows(_gravity_kernel, mx, q)
 
 
 @pytree_dataclass
@@ -205,7 +268,7 @@ class MjcfChain(Chain):
         return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
-        x, J = _site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
+        x, J = site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
         batch = qc.shape[1:]
         return x.T.reshape((3,) + batch), jnp.moveaxis(J, 0, -1).reshape((3, self.n) + batch)
 

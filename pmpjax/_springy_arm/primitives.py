@@ -21,7 +21,7 @@ import numpy as np
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
 from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
-from .._chains.mjcf import MjcfChain, gravity_gradient, gravity_terms, site_position
+from .._chains.mjcf import MjcfChain, gravity_gradients, gravity_terms, site_position
 from .._pmp.redundancy import weighted_pinv
 from .arm import CogArm, check_arm
 
@@ -262,17 +262,12 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
         batch = tuple(np.broadcast_shapes(q.shape, q_set.shape, K.shape))
     except ValueError as e:
         raise ValueError(f"leading axes of `q` {q.shape}, `q_set` {q_set.shape}, `K` {K.shape} do not broadcast") from e
-    flat = lambda a: jnp.broadcast_to(a, batch).reshape(-1, n)  # noqa: E731
-    return _force_field(chain, flat(q), flat(q_set), flat(K), gravity).reshape(batch[:-1] + (3,))
-
-
-@functools.partial(jax.jit, static_argnames=("gravity",))
-def _force_field(chain, q, q_set, K, gravity):
-    tau = -K * (q - q_set)
+    q = jnp.broadcast_to(q, batch)
+    tau = -jnp.broadcast_to(K, batch) * (q - jnp.broadcast_to(q_set, batch))
     if gravity:
-        tau = tau - jax.vmap(lambda qq: gravity_gradient(chain.mjx_model, qq))(q)
+        tau = tau - gravity_gradients(chain.mjx_model, q.reshape(-1, n)).reshape(batch)
     J = chain.jacobian(q)
-    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (chain.n,)))  # (B, n, 3), unweighted
+    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
     return jnp.einsum("...nm,...n->...m", Jp, tau)
 
 
