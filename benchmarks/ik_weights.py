@@ -85,7 +85,6 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 import fitting  # noqa: E402
-from fitting._ik.examples import fig1_data  # noqa: E402
 
 
 def baseline_subject(Qd, Xd, Js, gamma, iters, w_min=1e-3):
@@ -127,7 +126,7 @@ def time_min(f, repeats):
 
 def workload(quick):
     n_subj, K, iters, gamma = (200 if quick else 1000), 500, (20 if quick else 50), 0.6
-    q, x, J = (np.asarray(a) for a in fig1_data(jax.random.PRNGKey(0), n_reps=n_subj, K=K))
+    q, x, J = (np.asarray(a) for a in fitting.ik_fig1_data(jax.random.PRNGKey(0), n_reps=n_subj, K=K))
     return n_subj, K, iters, gamma, q, x, J
 
 
