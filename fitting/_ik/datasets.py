@@ -324,7 +324,7 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     have = r(mk).any(-1).sum(-1) > 0  # items with at least one trial
     mkr = r(mk) & have[..., None, None]
     res = bootstrap_ik_weights(r(qd), r(xd), r(J), mask=mkr, n_boot=n_boot, key=key, level=level,
-                               gamma=gamma, fixed=fixed, on_invalid="flag", **options)
+                               gamma=gamma, fixed=fixed, **options)
     nan = lambda a: np.where(have[..., None], np.asarray(a), np.nan)  # noqa: E731
     st = np.asarray(res.status)
     return dict(w=nan(res.w), lo=nan(res.lo), hi=nan(res.hi), status=np.asarray(res.w_status),

@@ -9,7 +9,7 @@ objects for both versions: structs -> dicts, cells and struct arrays -> lists (c
 order), char -> str, numeric arrays squeezed as ``scipy.io.loadmat(simplify_cells=True)`` does.
 
 Why h5py and not a v7.3 package (measured 2026-12-01, 2-core CPU, load ≈ 11, the 3-participant
-synthetic data set of the tests, 72 trials): reading, this module 0.69 s, ``mat73`` 0.65 0.82 s,
+synthetic data set of the tests, 72 trials): reading, this module 0.69 s, ``mat73`` 0.65: 0.82 s,
 ``hdf5storage`` 0.2.2 3.7 s; writing, this module 0.57 s, ``hdf5storage`` 1.8 s. ``mat73`` only
 reads, returns (P, 1) cells as nested lists and would still need the conversion to our layout;
 ``hdf5storage`` reads both our files and MATLAB's but is 5× slower and adds a dependency for
