@@ -23,6 +23,14 @@ SciPy: 1 start; defaults ``--sizes 1 10 100 1000 --scipy-budget 240``)::
         1000         0.0    242.35       242.3        4.13      138     0.993
     (1000: compile 0.0 = the 16-subject chunk's executable reused)
 
+Re-run 2026-12-01 18:10–18:50 UTC after the shared Newton solver (``pmpjax._base.newton``) and
+the ``Status`` codes replaced the equilibria's own loop, on the same machine shared by 7 sessions
+(load average 18–21 throughout; every figure is inflated ~20–30× and only same-run ratios mean
+anything): SciPy loop 696.9 s/subject (1 subject; 33.3 s when quiet), JAX 1 subject: compile
+399.2 s, run 8.45 s, 82× SciPy (112× when quiet). The 1000-subject row (≈ 2 h at that load) was
+not run in the session; ``--sizes 16`` (one chunk) below, and the ``floor`` printed at the end,
+compare the per-subject cost with the cost of the equilibria it needs.
+
 Target (>= 100x the SciPy loop at 1000 subjects) met: 138x on the quiet machine. An earlier run
 under load 3–5 gave 60.1 s/subject for SciPy (2 subjects in 60 s) and 329.6 ms/subject for JAX
 (182x): the single-threaded SciPy loop slows more under load than the JAX batch. Before the
