@@ -12,6 +12,7 @@ from ._chains.kinematics import Wrist as Wrist
 from ._chains.kinematics import manipulability as manipulability
 from ._chains.mjcf import MjcfChain as MjcfChain
 from ._chains.shoulder_elbow import Arm4 as Arm4
+from ._chains.shoulder_elbow import ShoulderElbowArm as ShoulderElbowArm
 from ._data.matlab import HugmpSubject as HugmpSubject
 from ._data.matlab import hugmp_arrays as hugmp_arrays
 from ._data.matlab import ik_dataset_arrays as ik_dataset_arrays
