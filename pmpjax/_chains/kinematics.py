@@ -16,6 +16,7 @@ import numpy as np
 
 from .._base.linalg import det, from_soa, mm, to_soa
 from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
+from .._base.rotations import rotation_matrix
 from .._base.trig import sincos
 from .._base.validate import as_array, check_positive, is_concrete
 
@@ -187,29 +188,7 @@ class Wrist(Chain):
         """Hand orientation ``R(q)`` (..., 3, 3) of Eq 6."""
         q = jnp.asarray(q)
         a, b, c = q[..., 0], q[..., 1], q[..., 2]
-        return _rx(-a) @ _rz(b) @ _ry(c)
-
-
-def _rot(c, s, axis):
-    o, z = jnp.ones_like(c), jnp.zeros_like(c)
-    rows = {
-        0: [[o, z, z], [z, c, -s], [z, s, c]],
-        1: [[c, z, s], [z, o, z], [-s, z, c]],
-        2: [[c, -s, z], [s, c, z], [z, z, o]],
-    }[axis]
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
-
-
-def _rx(t):
-    return _rot(jnp.cos(t), jnp.sin(t), 0)
-
-
-def _ry(t):
-    return _rot(jnp.cos(t), jnp.sin(t), 1)
-
-
-def _rz(t):
-    return _rot(jnp.cos(t), jnp.sin(t), 2)
+        return rotation_matrix(0, -a) @ rotation_matrix(2, b) @ rotation_matrix(1, c)
 
 
 @pytree_dataclass

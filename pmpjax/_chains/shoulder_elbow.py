@@ -1,4 +1,5 @@
-"""4-DoF shoulder–elbow arm (HuG-MP convention; also the 4-DoF chain of the IK paper's Exp. 1).
+"""``ShoulderElbowArm`` (alias ``Arm4``): the 4-DoF shoulder–elbow arm of the HuG-MP recordings
+(also the 4-DoF chain of the IK paper's Experiment 1).
 
 Shoulder-centred frame: x forward, y to the subject's left, z up; zero pose = arm hanging down,
 elbow straight. ``p(q) = Rx(q1) Ry(q2) Rz(−q3) ([0, 0, −L1] + Ry(−q4) [0, 0, −L2])`` [m], angles
@@ -14,23 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass, static_field
+from .._base.rotations import matmul_rows, rotation_rows
 from .._base.validate import as_array, check_positive
 from .kinematics import Chain
-
-
-def _rot(axis, t):
-    """Elementary rotation as a nested list [[.]*3]*3 of arrays (component-leading)."""
-    c, s = jnp.cos(t), jnp.sin(t)
-    o, z = jnp.ones_like(t), jnp.zeros_like(t)
-    return {
-        0: [[o, z, z], [z, c, -s], [z, s, c]],
-        1: [[c, z, s], [z, o, z], [-s, z, c]],
-        2: [[c, -s, z], [s, c, z], [z, z, o]],
-    }[axis]
-
-
-def _mul(A, B):
-    return [[sum(A[i][k] * B[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
 
 
 def _cross(a, b):
@@ -38,8 +25,10 @@ def _cross(a, b):
 
 
 @pytree_dataclass
-class Arm4(Chain):
+class ShoulderElbowArm(Chain):
     """Shoulder (3 rotations) + elbow chain, hand position ``x`` (3,) [m] relative to the shoulder.
+
+    The 4-DoF arm of the HuG-MP recordings (``pj.Arm4`` is the same class under its old name).
 
     ``L1`` upper-arm and ``L2`` forearm-to-hand lengths [m] are array leaves (differentiable,
     vmappable). Analytic Jacobian: column i is ``a_i × (p − o_i)`` with the joint axes
@@ -60,10 +49,10 @@ class Arm4(Chain):
 
     def fk_jac_soa(self, qc):
         q1, q2, q3, q4 = qc[0], qc[1], qc[2], qc[3]
-        R1 = _rot(0, q1)
-        R12 = _mul(R1, _rot(1, q2))
-        R123 = _mul(R12, _rot(2, -q3))
-        R1234 = _mul(R123, _rot(1, -q4))
+        R1 = rotation_rows(0, q1)
+        R12 = matmul_rows(R1, rotation_rows(1, q2))
+        R123 = matmul_rows(R12, rotation_rows(2, -q3))
+        R1234 = matmul_rows(R123, rotation_rows(1, -q4))
         L1, L2 = self.L1, self.L2
         elbow = [-L1 * R123[i][2] for i in range(3)]
         p = [elbow[i] - L2 * R1234[i][2] for i in range(3)]
@@ -85,3 +74,6 @@ class Arm4(Chain):
     def workspace_description(self):
         L1, L2 = float(self.L1), float(self.L2)
         return f"shell {abs(L1 - L2):.3g} m < |x| < {L1 + L2:.3g} m"
+
+
+Arm4 = ShoulderElbowArm  # the earlier name (HuG-MP's 4 joints); kept so existing code runs
