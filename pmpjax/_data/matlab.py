@@ -394,7 +394,8 @@ def load_ik_dataset(path) -> dict:
 
     Returns ``{"participants": [...], "ik_data": [{cond: {"qdot" (K, n), "xdot" (K, m),
     "J" (K, m, n)}}], "w_true": [...] or None}``. Trials may be a cell of structs or a struct
-    array; numeric and char fields beside the conditions and targets are ignored. Raises ``ValueError`` naming the file, participant, condition, target, trial and field
+    array; numeric and char fields beside the conditions and targets are ignored. Raises
+    ``ValueError`` naming the file, participant, condition, target, trial and field
     of any malformed entry.
     """
     path = _as_path("path", path)
