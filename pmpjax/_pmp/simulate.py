@@ -202,6 +202,8 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
     """
+    if not isinstance(model, _PMP):
+        raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
     traj = simulate_sequence(model, planner, q0, jnp.asarray(target)[..., None, :], duration=duration,
                              dt=dt, saveat=saveat, singular_tol=singular_tol)

@@ -26,6 +26,11 @@ def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
     ``targets`` (8, 2), ``A_sum``/``A_net`` (8, 2) normalised curvature areas (out, in),
     ``A_hyst`` (8,), and the parameters used. The areas are normalised by ``radius²``.
     """
+    unknown = sorted(set(overrides) - set(FIGURE3))
+    if unknown:
+        raise TypeError(f"figure3_data: unknown parameter(s) {unknown}; known: {sorted(FIGURE3)}")
+    if not (isinstance(dt, int | float) and dt > 0):
+        raise ValueError(f"`dt` must be a positive number of seconds, got {dt!r}")
     p = {**FIGURE3, **overrides}
     chain = Wrist(1.0)
     model = Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=damping_from_stiffness(p["KJ"], p["tau0"]))
@@ -47,6 +52,9 @@ def plot_figure3(data: dict, *, fig=None):
     """Panels A (task paths), B (joint trajectories), C (tangential speed). Returns the figure."""
     import matplotlib.pyplot as plt
 
+    missing = [k for k in ("t", "x", "q", "speed", "targets", "directions") if k not in data]
+    if missing:
+        raise ValueError(f"`data` must be figure3_data()'s result; missing {missing}")
     fig = fig or plt.figure(figsize=(13, 4.2))
     ax_a, ax_b, ax_c = fig.subplots(1, 3)
     colors = plt.cm.hsv(np.linspace(0, 1, 9)[:8])
