@@ -40,8 +40,9 @@ not run in the session. ``--sizes 16 --scipy-subjects 1`` (18:50–19:10, load 1
 
 So the fit costs ~1.4× the equilibria it needs at each start's own LM step count (the floor: 500
 implicit equilibria and their 8-tangent Jacobian per LM step); the rest is vmapped lanes waiting
-for the slowest start of their chunk (the chunked bound, 3× the floor, is not reached because
-the equilibria's Newton loops inside the LM need fewer iterations than the cold start timed here).
+for the slowest start of their chunk. (The chunked bound, 3× the floor, is not reached: the floor
+pass is timed at the starts, where the model's equilibria lie farther from the observed postures
+each Newton loop starts from than near the optimum, so it likely over-counts Newton steps.)
 The ≥ 138× target needs the quiet-machine re-run: ``python benchmarks/donders_fit.py``.
 
 Target (>= 100x the SciPy loop at 1000 subjects) met: 138x on the quiet machine. An earlier run
