@@ -28,8 +28,22 @@ the ``Status`` codes replaced the equilibria's own loop, on the same machine sha
 (load average 18–21 throughout; every figure is inflated ~20–30× and only same-run ratios mean
 anything): SciPy loop 696.9 s/subject (1 subject; 33.3 s when quiet), JAX 1 subject: compile
 399.2 s, run 8.45 s, 82× SciPy (112× when quiet). The 1000-subject row (≈ 2 h at that load) was
-not run in the session; ``--sizes 16`` (one chunk) below, and the ``floor`` printed at the end,
-compare the per-subject cost with the cost of the equilibria it needs.
+not run in the session. ``--sizes 16 --scipy-subjects 1`` (18:50–19:10, load 19–22)::
+
+    SciPy loop: 336.6 s/subject over 1 subject (nfev 9; a different subject from the run above,
+    nfev 42: one SciPy subject is a noisy baseline, the quiet run averages 8)
+    subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
+          16       282.8     73.60      4599.9        0.22       73     1.000
+    floor: one residual+Jacobian pass of a chunk (16x2 starts) 2.385 s; equilibria cost 3269.6
+    ms/subject at each start's own steps (mean 20.9), 9687.6 ms/subject at the chunk's slowest
+    start (mean 64.0)
+
+So the fit costs ~1.4× the equilibria it needs at each start's own LM step count (the floor: 500
+implicit equilibria and their 8-tangent Jacobian per LM step); the rest is vmapped lanes waiting
+for the slowest start of their chunk. (The chunked bound, 3× the floor, is not reached: the floor
+pass is timed at the starts, where the model's equilibria lie farther from the observed postures
+each Newton loop starts from than near the optimum, so it likely over-counts Newton steps.)
+The ≥ 138× target needs the quiet-machine re-run: ``python benchmarks/donders_fit.py``.
 
 Target (>= 100x the SciPy loop at 1000 subjects) met: 138x on the quiet machine. An earlier run
 under load 3–5 gave 60.1 s/subject for SciPy (2 subjects in 60 s) and 329.6 ms/subject for JAX
