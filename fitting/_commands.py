@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pmpjax._base.validate import csv_floats
+
 
 def _x64():
     import jax
@@ -132,16 +134,7 @@ def _read_ik_csv(path: Path) -> dict:
         cells = next(csv.reader([ln]))
         if len(cells) != len(header):
             raise ValueError(f"{path}: line {lineno}: {len(cells)} fields, header has {len(header)}")
-        vals = []
-        for h in (*qcols, *xcols, *jcols):
-            try:
-                v = float(cells[idx[h]])
-            except ValueError:
-                raise ValueError(f"{path}: line {lineno}, column {idx[h] + 1} ({h}): not a number: "
-                                 f"{cells[idx[h]]!r}") from None
-            if not np.isfinite(v):
-                raise ValueError(f"{path}: line {lineno}, column {idx[h] + 1} ({h}): NaN or inf")
-            vals.append(v)
+        vals = csv_floats(path, lineno, cells, idx, (*qcols, *xcols, *jcols))
         items.setdefault(cells[idx["item"]], []).append(vals)
     K = max(len(v) for v in items.values())
     B = len(items)

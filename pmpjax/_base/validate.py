@@ -87,3 +87,19 @@ def check_finite_masked(name: str, a, mask, *, labels=None, where: str = "") -> 
             f"{prefix}`{name}` contains NaN or inf at {int(bad.sum())} valid sample(s); first: "
             f"subject {subject}, sample {int(i)} (mask them out or drop them)"
         )
+
+
+def csv_floats(path, line: int, row, columns: dict, names) -> list[float]:
+    """Finite floats of ``row``'s fields ``names`` (``columns`` maps a name to its 0-based index);
+    a ``ValueError`` names the file, line, column and field of the first bad one."""
+    out = []
+    for name in names:
+        i = columns[name]
+        try:
+            v = float(row[i])
+        except ValueError:
+            raise ValueError(f"{path}: line {line}, column {i + 1} ({name}): not a number: {row[i]!r}") from None
+        if not np.isfinite(v):
+            raise ValueError(f"{path}: line {line}, column {i + 1} ({name}): NaN or inf")
+        out.append(v)
+    return out

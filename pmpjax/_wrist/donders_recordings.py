@@ -35,7 +35,7 @@ import os
 
 import numpy as np
 
-from .._base.validate import as_array, check_finite_masked, check_positive, check_positive_int, check_spd
+from .._base.validate import as_array, check_finite_masked, check_positive, check_positive_int, check_spd, csv_floats
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .donders import SCREEN_HALF_ANGLE_DEG
@@ -306,16 +306,7 @@ def _read_csv(path):
         except ValueError as e:
             raise ValueError(f"{path}: line {ln}, column {col['sample'] + 1} (sample): must be an integer, "
                              f"got {row[col['sample']]!r}") from e
-        vals = []
-        for c in (*ori_cols, "x1", "x2"):
-            try:
-                v = float(row[col[c]])
-            except ValueError:
-                raise ValueError(f"{path}: line {ln}, column {col[c] + 1} ({c}): not a number: "
-                                 f"{row[col[c]]!r}") from None
-            if not np.isfinite(v):
-                raise ValueError(f"{path}: line {ln}, column {col[c] + 1} ({c}): NaN or inf")
-            vals.append(v)
+        vals = csv_floats(path, ln, row, col, (*ori_cols, "x1", "x2"))
         ori, x = vals[: len(ori_cols)], vals[len(ori_cols):]
         if sample in data.setdefault(name, {}):
             raise ValueError(f"{path}: line {ln}: duplicate sample {sample} for subject {name!r}")
