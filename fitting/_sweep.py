@@ -604,10 +604,11 @@ def sweep(
         return {name: np.concatenate([a[sl], np.repeat(a[sl.stop - 1: sl.stop], pad, 0)]) if pad else a[sl]
                 for name, a in numeric.items()}
 
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     bar = Progress("sweep rows", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                   disable=not progress, transient=False)
+                   disable=not progress, transient=False, console=Console(stderr=True))
     task = bar.add_task("sweep", total=n, completed=sum(min(chunk_rows, n - k * chunk_rows) for k in reused))
     bar.start()
 
