@@ -24,6 +24,7 @@ NOT_ENTRY_POINTS = {
     "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",
     "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
     "fitting.StiffnessFit", "fitting.PointingAnalysis", "fitting.PointingPrediction", "fitting.TimeConstantFit",
+    "fitting.PointingModelFit",
 }
 
 
