@@ -3,6 +3,7 @@
 from ._donders import DondersFit as DondersFit
 from ._donders import coefficient_names as coefficient_names
 from ._donders import donders_coefficients as donders_coefficients
+from ._donders import fit_average_donders as fit_average_donders
 from ._donders import fit_donders as fit_donders
 from ._donders import parameter_names as parameter_names
 from ._donders import params_from_stiffness as params_from_stiffness
@@ -33,6 +34,10 @@ from ._pointing import PointingAnalysis as PointingAnalysis
 from ._pointing import PointingPrediction as PointingPrediction
 from ._pointing import analyze_pointing as analyze_pointing
 from ._pointing import predict_pointing as predict_pointing
+from ._pointing_plots import plot_pointing_curvature as plot_pointing_curvature
+from ._pointing_plots import plot_pointing_joints as plot_pointing_joints
+from ._pointing_plots import plot_pointing_paths as plot_pointing_paths
+from ._pointing_plots import plot_pointing_speed as plot_pointing_speed
 from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights
@@ -43,5 +48,7 @@ from ._sweep import latin_hypercube as latin_hypercube
 from ._sweep import params_from_csv as params_from_csv
 from ._sweep import sobol as sobol
 from ._sweep import sweep as sweep
+from ._time_constants import PointingModelFit as PointingModelFit
 from ._time_constants import TimeConstantFit as TimeConstantFit
+from ._time_constants import fit_pointing_model as fit_pointing_model
 from ._time_constants import fit_time_constants as fit_time_constants

@@ -445,3 +445,59 @@ def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
         chain, jnp.asarray(KJ)[..., None, :, :], jnp.asarray(q_rest)[..., None, :], pointing
     ).q
     return rotvec_from_joint_angles(q)[..., 0]
+
+
+def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: int = 17, **options) -> DondersFit:
+    """The paper's own route to ``KJ`` and ``q_rest`` (Tommasino & Campolo 2016, 2017 Section 2):
+    NIO on the subject's *average* Donders surface instead of on every sample.
+
+    Per subject the quadratic Donders surface (``pmpjax.fit_donders_surface``, design §3.4) is
+    fitted to the rotation vectors of the observed postures ("an extreme down-sampling of
+    experimental data"); ``grid × grid`` postures on that surface, spanning the observed range of
+    ``(r_y, r_z)``, then go to :func:`fit_donders` (``**options`` are passed on). Arguments as in
+    :func:`fit_donders` (``postures`` (S, N, 3) joint angles [rad], ``pointing`` (S, N, 2) [m]).
+
+    The surface postures are noise-free, so the returned ``loss``/``rms`` measure how far the
+    λ0-PMP's own surface is from a quadratic, and its standard errors do not describe the data:
+    use :func:`fit_donders` on the samples for uncertainty. A quadratic surface has 6 coefficients
+    and ``(KJ, q_rest)`` 8 parameters (trace fixed): the fit determines Donders' law (torsion over
+    the observed range) but drifts along the remaining flat directions of the parameters, often
+    until ``max_steps`` (status MAX_STEPS), and may end with ``q_rest`` far from the postures: the
+    samples route (:func:`fit_donders`), where noise and the data's spread pin the parameters
+    down, is the better-posed of the two (tests/test_pointing.py compares them).
+    """
+    from pmpjax._wrist.donders import evaluate_surface, fit_donders_surface
+    from pmpjax._wrist.orientation import joint_angles_from_matrix, matrix_from_rotvec
+
+    if not isinstance(chain, Wrist):
+        raise TypeError(f"`chain` must be a pmpjax.Wrist (Donders surfaces are of wrist orientations), got "
+                        f"{type(chain).__name__}")
+    grid = check_positive_int("grid", grid)
+    if grid < 3:
+        raise ValueError(f"`grid` must be >= 3 (a quadratic surface), got {grid}")
+    pointing = np.asarray(as_array("pointing", pointing, tail=(None, 2), finite=False), dtype=float)
+    postures = np.asarray(as_array("postures", postures, tail=(None, 3), finite=False), dtype=float)
+    if postures.ndim == 2:
+        pointing, postures = pointing[None], postures[None]
+        mask = None if mask is None else np.asarray(mask)[None]
+    if postures.ndim != 3 or pointing.shape[:2] != postures.shape[:2]:
+        raise ValueError(f"`pointing` (S, N, 2) and `postures` (S, N, 3) must agree in (S, N); got "
+                         f"{pointing.shape} and {postures.shape}")
+    S, N = postures.shape[:2]
+    mask = np.ones((S, N), bool) if mask is None else np.asarray(mask)
+    if mask.shape != (S, N) or mask.dtype != bool:
+        raise ValueError(f"`mask` must be a bool array of shape {(S, N)}, got {mask.dtype} {mask.shape}")
+    check_finite_masked("postures", postures, mask)
+    r = np.asarray(rotvec_from_joint_angles(np.where(mask[..., None], postures, 0.0)))
+    surface = fit_donders_surface(r, mask=mask)
+    u = np.linspace(0.0, 1.0, grid)
+    ry_lo, rz_lo = (np.where(mask, r[..., i], np.inf).min(axis=1) for i in (1, 2))
+    ry_hi, rz_hi = (np.where(mask, r[..., i], -np.inf).max(axis=1) for i in (1, 2))
+    ry = ry_lo[:, None, None] + (ry_hi - ry_lo)[:, None, None] * u[None, :, None]
+    rz = rz_lo[:, None, None] + (rz_hi - rz_lo)[:, None, None] * u[None, None, :]
+    ry, rz = np.broadcast_arrays(ry, rz)
+    rx = np.asarray(evaluate_surface(surface.coef[:, None, :], ry.reshape(S, -1), rz.reshape(S, -1)))
+    R = np.asarray(matrix_from_rotvec(np.stack([rx, ry.reshape(S, -1), rz.reshape(S, -1)], -1)))
+    q = np.asarray(joint_angles_from_matrix(R))
+    x = float(chain.d) * np.stack([-R[..., 1, 0], R[..., 2, 0]], -1)
+    return fit_donders(chain, x, q, **options)

@@ -84,40 +84,49 @@ def least_squares(
         J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
         return r, J
 
-    r0, J0 = lin(x0)
-    if r0.ndim != 1:
-        raise ValueError(f"`residual` must return a 1-D vector, got shape {r0.shape}")
-    cost0 = 0.5 * jnp.sum(r0**2)
-    finite0 = jnp.isfinite(cost0) & jnp.all(jnp.isfinite(J0))
-    state0 = dict(x=x0, r=r0, J=J0, cost=cost0, lam=jnp.asarray(damping), nu=jnp.asarray(2.0),
-                  step=jnp.asarray(0), done=~finite0, conv=jnp.asarray(False))
+    r_shape = jax.eval_shape(lambda y: residual(y, args), x0)
+    if r_shape.ndim != 1:
+        raise ValueError(f"`residual` must return a 1-D vector, got shape {r_shape.shape}")
+    N, p = r_shape.shape[0], x0.shape[0]
+    dtype = x0.dtype
+    # The initial linearisation is the loop's first pass (`first`), so the residual and its
+    # Jacobian appear once in the compiled graph (they dominate compile time for residuals that
+    # run a simulation), instead of once before the loop and once inside it.
+    state0 = dict(x=x0, r=jnp.zeros((N,), dtype), J=jnp.zeros((N, p), dtype), cost=jnp.asarray(jnp.inf, dtype),
+                  lam=jnp.asarray(damping, dtype), nu=jnp.asarray(2.0, dtype), step=jnp.asarray(0),
+                  done=jnp.asarray(False), conv=jnp.asarray(False), first=jnp.asarray(True))
 
     def cond(s):
         return (~s["done"]) & (s["step"] < max_steps)
 
     def body(s):
-        x, r, J, cost, lam, nu = s["x"], s["r"], s["J"], s["cost"], s["lam"], s["nu"]
+        x, r, J, cost, lam, nu, first = s["x"], s["r"], s["J"], s["cost"], s["lam"], s["nu"], s["first"]
         g = J.T @ r
         H = J.T @ J
         d = jnp.maximum(jnp.diag(H), 1e-12 * jnp.max(jnp.diag(H)) + 1e-300)
         delta = -jnp.linalg.solve(H + lam * jnp.diag(d), g)
+        delta = jnp.where(first, 0.0, delta)
         x_new = x + delta
         r_new, J_new = lin(x_new)
         cost_new = 0.5 * jnp.sum(r_new**2)
         pred = -(g @ delta + 0.5 * delta @ (H @ delta))
         ok = jnp.isfinite(cost_new) & jnp.all(jnp.isfinite(J_new))
         rho = jnp.where(ok & (pred > 0), (cost - cost_new) / jnp.where(pred > 0, pred, 1.0), -1.0)
-        accept = rho > 0
+        accept = (rho > 0) | first
         lam_acc = lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-        small_step = jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(x) + xtol)
-        small_f = accept & (jnp.abs(cost - cost_new) <= ftol * cost)
+        small_step = ~first & (jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(x) + xtol))
+        small_f = ~first & accept & (jnp.abs(cost - cost_new) <= ftol * cost)
         x, r, J, cost = jax.tree_util.tree_map(
             lambda a, b: jnp.where(accept, a, b), (x_new, r_new, J_new, cost_new), (x, r, J, cost)
         )
-        small_g = jnp.max(jnp.abs(J.T @ r)) <= gtol
+        small_g = ~first & (jnp.max(jnp.abs(J.T @ r)) <= gtol)
         conv = small_g | small_f | small_step
-        return dict(x=x, r=r, J=J, cost=cost, lam=jnp.where(accept, lam_acc, lam * nu),
-                    nu=jnp.where(accept, 2.0, 2.0 * nu), step=s["step"] + 1, done=conv, conv=conv)
+        # A non-finite start stops the loop (reported as not converged).
+        done = conv | (first & ~ok)
+        return dict(x=x, r=r, J=J, cost=cost,
+                    lam=jnp.where(first, lam, jnp.where(accept, lam_acc, lam * nu)),
+                    nu=jnp.where(first, nu, jnp.where(accept, 2.0, 2.0 * nu)),
+                    step=s["step"] + jnp.where(first, 0, 1), done=done, conv=conv, first=jnp.asarray(False))
 
     s = lax.while_loop(cond, body, state0)
     gn = jnp.max(jnp.abs(s["J"].T @ s["r"]))

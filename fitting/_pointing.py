@@ -62,8 +62,8 @@ from pmpjax._wrist.orientation import joint_angles_from_quat
 from pmpjax._wrist.pointing import (
     MOVEMENT_LABELS,
     PointingRecording,
-    _time_grid,
     drop_trials,
+    model_grid,
     normalised_movements,
     trial_problems,
 )
@@ -439,8 +439,8 @@ def _crossings(h, v, threshold):
     peak = jnp.where(curv < 0, v0 - (vp - vm) ** 2 / (8 * jnp.where(curv < 0, curv, -1.0)), v0)
     level = threshold * peak
     below = v < level[:, None]
-    i_on = jnp.max(jnp.where(below & (idx < i[:, None]), idx, 0), axis=1)
-    i_off = jnp.min(jnp.where(below & (idx > i[:, None]), idx, n - 1), axis=1)
+    i_on = jnp.max(jnp.where(below & (idx[None] < i[:, None]), idx[None], 0), axis=1)
+    i_off = jnp.min(jnp.where(below & (idx[None] > i[:, None]), idx[None], n - 1), axis=1)
     a0, a1 = (jnp.take_along_axis(v, j[:, None], axis=1)[:, 0] for j in (i_on, i_on + 1))
     b0, b1 = (jnp.take_along_axis(v, j[:, None], axis=1)[:, 0] for j in (i_off - 1, i_off))
     s_on = h * (i_on + (level - a0) / jnp.where(a1 != a0, a1 - a0, 1.0))
@@ -458,17 +458,19 @@ def _silverman_weights(bandwidth, h, J):
 
 
 def _smooth(y, w, *, edge):
-    """``y`` (B, n, k) convolved with per-item weights ``w`` (B, 2J + 1); outside the grid ``y``
-    continues as its end values (``edge``) or as zeros. (Shifted sums: on CPU ~20× faster than a
-    depthwise ``conv_general_dilated`` with per-item kernels.)"""
+    """``y`` (B, n, k) convolved with per-item symmetric weights ``w`` (B, 2J + 1); outside the
+    grid ``y`` continues as its end values (``edge``) or as zeros. By FFT: a handful of
+    operations in the compiled graph whatever ``J`` (shifted sums would add 2J + 1 per call)."""
     J = (w.shape[1] - 1) // 2
     if J == 0:
         return y
+    n = y.shape[1]
     lo = jnp.repeat(y[:, :1], J, axis=1) if edge else jnp.zeros_like(y[:, :J])
     hi = jnp.repeat(y[:, -1:], J, axis=1) if edge else jnp.zeros_like(y[:, :J])
     yp = jnp.concatenate([lo, y, hi], axis=1)
-    n = y.shape[1]
-    return sum(w[:, j, None, None] * yp[:, j:j + n] for j in range(2 * J + 1))
+    L = 1 << (n + 4 * J).bit_length()
+    conv = jnp.fft.irfft(jnp.fft.rfft(yp, n=L, axis=1) * jnp.fft.rfft(w, n=L, axis=1)[:, :, None], n=L, axis=1)
+    return conv[:, 2 * J:2 * J + n]  # symmetric kernel: the convolution is the centred moving sum
 
 
 def spline_bandwidth(lam, rate):
@@ -573,10 +575,11 @@ class PointingPrediction:
     """Donders-fitted λ0-PMP predictions of every movement (:func:`predict_pointing`), numpy arrays.
 
     ``subjects``, ``labels``; ``tau0``, ``tau``, ``k`` (S, L) the time constants [s] and Eq 10
-    gain used; ``t`` (S, L, N) [s], ``x`` (S, L, N, 2) [m], ``q`` (S, L, N, 3) [rad], ``speed``
-    (S, L, N) [m/s] the simulated movements from the mean rest posture; ``onset``, ``offset``,
-    ``duration`` (S, L) [s] their cut at the analysis threshold; ``path`` (S, L, n, 2), ``q_path``
-    (S, L, n, 3), ``speed_path`` (S, L, n) at the normalised samples; ``a_sum``, ``a_net`` (S, L);
+    gain used (at the mean rest posture); ``t`` (S, L, N) [s], ``x`` (S, L, N, 2) [m], ``q``
+    (S, L, N, 3) [rad], ``speed`` (S, L, N) [m/s] the simulated movements (mean over the trials,
+    each from its measured rest posture); ``onset``, ``offset``, ``duration`` (S, L) [s] their cut
+    at the analysis threshold; ``path`` (S, L, n, 2), ``q_path`` (S, L, n, 3), ``speed_path``
+    (S, L, n) at the normalised samples; ``a_sum``, ``a_net`` (S, L) (means over the trials);
     the comparison with the data: ``p_model`` (S, L) p-value of the one-sample t-test of the
     measured ``A_net`` against the model's, ``captured`` (S, L) (tested and p ≥ ``alpha``),
     ``n_tested``, ``n_captured`` (S,) and ``share_captured`` (S,) = captured / 16 (the paper's
@@ -639,44 +642,59 @@ def predict_pointing(analysis: PointingAnalysis, KJ, q_rest, *, tau0=None, tau=N
     scalar, (S,) or (S, L); default the paper's ``τ = τ0 = T_sj/5`` with ``T_sj`` the measured
     mean duration.
 
-    Each movement starts at rest in the subject's mean rest posture before it and goes to the
-    target; ``W = τ0 KJ`` (Eq 7), Arimoto ``K(t)`` (Eq 8) with ``k = b_max(B(q0))/τ0`` (Eq 10).
-    All subjects × movements run in one batched ``pmpjax.simulate`` call (in time normalised by
-    ``T_sj``, see ``normalised_movements``). The model movement is cut at the analysis' speed
-    threshold like the data, and its ``A_net`` is compared with the measured ones by a one-sample
-    t-test per subject × movement (α = 0.05). Returns a :class:`PointingPrediction`.
+    Every measured movement is simulated from its measured rest posture before the movement to
+    the target: ``W = τ0 KJ`` (Eq 7), Arimoto ``K(t)`` (Eq 8) with ``k = b_max(B(q0))/τ0``
+    (Eq 10). All subjects × movements × trials run in one batched ``pmpjax.simulate`` call (in
+    time normalised by ``T_sj``, see ``normalised_movements``). The model movements are observed
+    through the analysis' smoothing spline (its equivalent kernel) and cut at its speed
+    threshold like the data; the model's values per subject × movement are the means over the
+    trials. Its ``A_net`` is compared with the measured ones by a one-sample t-test per subject ×
+    movement (α = 0.05). Returns a :class:`PointingPrediction`.
     """
     KJ, q_rest = _check_params(analysis, KJ, q_rest)
-    q0, target, T, has = _movement_inputs(analysis)
-    S, L = T.shape
+    q_mean, target, T, has = _movement_inputs(analysis)
+    S, L, K = analysis.valid.shape
     tau0_ = _time_constant("tau0", tau0, T)
     tau_ = _time_constant("tau", tau, T)
     r0, r = tau0_ / T, tau_ / T
-    span, dt = _time_grid(np.concatenate([r0[has], r[has]]) if has.any() else np.array([0.2]))
-    B = S * L
-    flat = lambda a, tail=(): np.broadcast_to(a, (S, L) + tail).reshape((B,) + tail)  # noqa: E731
-    tr = normalised_movements(flat(KJ[:, None], (3, 3)), flat(q_rest[:, None], (3,)), flat(r0), flat(r),
+    span, dt = model_grid(np.concatenate([r0[has], r[has]]) if has.any() else np.array([0.2]))
+    valid = analysis.valid
+    q0 = np.where(valid[..., None], np.nan_to_num(analysis.rest_q), q_mean[:, :, None])
+    B = S * L * K
+    flat = lambda a, tail=(): np.broadcast_to(  # noqa: E731
+        np.reshape(a, (S, L, 1) + tail) if np.ndim(a) == 2 + len(tail) else a, (S, L, K) + tail).reshape((B,) + tail)
+    tr = normalised_movements(flat(KJ[:, None, None], (3, 3)), flat(q_rest[:, None, None], (3,)), flat(r0), flat(r),
                               flat(q0, (3,)), flat(target, (2,)), span=span, dt=dt, d=analysis.d)
     bw = flat(spline_bandwidth(analysis.lam, analysis.rate)[:, None] / T)
     prof = jax.device_get(_profiles_jit(tr, jnp.asarray(flat(T)), jnp.asarray(0.5 / analysis.rate / flat(T)),
                                         jnp.asarray(bw), h=float(dt), J=_kernel_halfwidth(bw, dt),
                                         threshold=analysis.threshold, n_samples=analysis.mean_path.shape[2],
                                         radius=analysis.radius))
-    rs = lambda a: np.asarray(a).reshape((S, L) + np.shape(a)[1:])  # noqa: E731
-    status = np.where(~has, int(Status.TOO_FEW_DATA), rs(tr.status))
-    ok = status == 0
-    mask = lambda a: np.where(ok.reshape(ok.shape + (1,) * (a.ndim - 2)), a, np.nan)  # noqa: E731
-    a_net = mask(rs(prof["a_net"]))
+    rs = lambda a: np.asarray(a).reshape((S, L, K) + np.shape(a)[1:])  # noqa: E731
+    sim_status = rs(tr.status)
+    bad = np.where(valid, sim_status, 0)
+    status = np.where(~has, int(Status.TOO_FEW_DATA), np.max(bad, axis=2))
+    use = valid & (sim_status == 0)
+
+    def mean(a):  # over the valid trials of each subject × movement; NaN where none
+        m = use.reshape(use.shape + (1,) * (a.ndim - 3))
+        n = np.maximum(use.sum(2), 1).reshape((S, L) + (1,) * (a.ndim - 3))
+        out = np.where(m, a, 0.0).sum(2) / n
+        return np.where((use.sum(2) > 0).reshape((S, L) + (1,) * (a.ndim - 3)), out, np.nan)
+
+    a_net = mean(rs(prof["a_net"]))
     p, captured, n_tested, n_captured = compare_curvature(analysis.a_net, a_net)
     W = tau0_[..., None, None] * KJ[:, None]
-    J = np.asarray(Wrist(analysis.d).jacobian(q0))
+    J = np.asarray(Wrist(analysis.d).jacobian(q_mean))
     k = np.linalg.eigvalsh(np.asarray(task_damping(J, W)))[..., -1] / tau0_
+    ok = status == 0
     t = np.asarray(tr.t)[None, None] * T[..., None]
     return PointingPrediction(
-        subjects=analysis.subjects, labels=analysis.labels, tau0=tau0_, tau=tau_, k=mask(k), t=t,
-        x=mask(rs(tr.x)), q=mask(rs(tr.q)), speed=mask(np.linalg.norm(rs(tr.xdot), axis=-1) / T[..., None]),
-        onset=mask(rs(prof["onset"])), offset=mask(rs(prof["offset"])), duration=mask(rs(prof["duration"])),
-        path=mask(rs(prof["path"])), q_path=mask(rs(prof["q_path"])), speed_path=mask(rs(prof["speed"])),
-        a_sum=mask(rs(prof["a_sum"])), a_net=a_net, p_model=p, captured=captured, n_tested=n_tested,
-        n_captured=n_captured, share_captured=n_captured / L, status=status, alpha=_ALPHA,
+        subjects=analysis.subjects, labels=analysis.labels, tau0=tau0_, tau=tau_, k=np.where(ok, k, np.nan), t=t,
+        x=mean(rs(tr.x)), q=mean(rs(tr.q)), speed=mean(np.linalg.norm(rs(tr.xdot), axis=-1) / flat(T).reshape(
+            S, L, K, 1)), onset=mean(rs(prof["onset"])), offset=mean(rs(prof["offset"])),
+        duration=mean(rs(prof["duration"])), path=mean(rs(prof["path"])), q_path=mean(rs(prof["q_path"])),
+        speed_path=mean(rs(prof["speed"])), a_sum=mean(rs(prof["a_sum"])), a_net=a_net, p_model=p,
+        captured=captured, n_tested=n_tested, n_captured=n_captured, share_captured=n_captured / L, status=status,
+        alpha=_ALPHA,
     )

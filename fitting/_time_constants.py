@@ -38,7 +38,8 @@ import numpy as np
 
 from pmpjax._base.status import Status
 from pmpjax._base.validate import check_positive_int
-from pmpjax._wrist.pointing import normalised_movements
+from pmpjax._chains.kinematics import Wrist
+from pmpjax._wrist.pointing import MODEL_DT, MODEL_SPAN, normalised_movements
 
 from ._optimise import covariance, least_squares
 from ._pointing import (
@@ -50,9 +51,9 @@ from ._pointing import (
     spline_bandwidth,
 )
 
-#: Static simulation grid of the fits, in units of the movement's duration T_sj: long enough for
-#: movements up to ~2 T_sj, steps ≤ τ/10 for τ ≥ 0.1 T_sj.
-FIT_SPAN, FIT_DT = 2.5, 0.01
+#: Static simulation grid of the fits, in units of the movement's duration T_sj (the predictions'
+#: default): long enough for movements up to ~2 T_sj, steps ≤ τ/10 for τ ≥ 0.1 T_sj.
+FIT_SPAN, FIT_DT = MODEL_SPAN, MODEL_DT
 
 
 @dataclasses.dataclass(frozen=True)
@@ -179,4 +180,154 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
         tau_movement=mov(tau_i), stderr=stderr.reshape(shape + (2,)), loss=loss.reshape(shape),
         rms=np.sqrt(2 * loss / n_res).reshape(shape), steps=np.asarray(res.steps).reshape(shape),
         status=status.reshape(shape), converged=(status == 0).reshape(shape), per_target=per_target,
+    )
+
+
+# --- the joint fit: KJ, q_rest, τ0, τ to postures and paths ----------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class PointingModelFit:
+    """Result of :func:`fit_pointing_model` (numpy arrays, S subjects).
+
+    ``KJ`` (S, 3, 3) [Nm/rad] (trace 4), ``q_rest`` (S, 3) [rad], ``tau0``, ``tau`` (S,) [s];
+    ``params`` (S, 10) the fitted vector (log-stiffness, q_rest, log τ0, log τ; ``param_names``),
+    ``stderr`` (S, 10) its Gauss–Newton standard errors; ``loss`` (S,) ½|r|² of the weighted
+    residual; ``torsion_rms`` (S,) [rad] of the Donders postures; ``path_rms`` (S,) RMS of the
+    path residual (dimensionless, as in :func:`fit_time_constants`); ``weights`` (S, 2) the block
+    weights ``1/σ`` (torsion, paths); ``steps``, ``status``, ``converged`` as elsewhere.
+    """
+
+    subjects: tuple
+    KJ: np.ndarray
+    q_rest: np.ndarray
+    tau0: np.ndarray
+    tau: np.ndarray
+    params: np.ndarray
+    stderr: np.ndarray
+    loss: np.ndarray
+    torsion_rms: np.ndarray
+    path_rms: np.ndarray
+    weights: np.ndarray
+    steps: np.ndarray
+    status: np.ndarray
+    converged: np.ndarray
+    param_names: tuple
+
+
+JOINT_PARAMS = ("logK[PS,PS]", "logK[FE,FE]", "logK[PS,FE]", "logK[PS,RUD]", "logK[FE,RUD]", "q_rest[PS]",
+                "q_rest[FE]", "q_rest[RUD]", "log tau0", "log tau")
+
+
+def _joint_residual(opts, n_torsion):
+    """Residual of one subject: torsion of the Donders postures (``n_torsion`` entries, weighted)
+    then the paths (weighted), as a function of θ (10,) and the subject's data."""
+    from ._donders import _residual_fn, stiffness_from_params
+
+    torsion = _residual_fn(Wrist(opts["d"]), 5, 4.0, "torsion", 1e-10)
+    popts = {k: v for k, v in opts.items()}
+
+    def residual(theta, data):
+        KJ = stiffness_from_params(theta[:5], 3, 4.0)
+        qr = theta[5:8]
+        dat = data["paths"]
+        r_t = torsion(theta[:8], (data["x"], data["q_obs"], data["w_obs"])) * data["weights"][0]
+        r_p = path_residual(jnp.exp(theta[8]) / dat["T"], jnp.exp(theta[9]) / dat["T"], KJ, qr, dat, **popts)
+        return jnp.concatenate([r_t, r_p * data["weights"][1]])
+
+    return residual
+
+
+@partial(jax.jit, static_argnames=("opts", "max_steps", "n_torsion"))
+def _fit_joint(theta0, data, *, opts, max_steps, n_torsion):
+    residual = _joint_residual(dict(opts), n_torsion)
+
+    def one(th0, dat):
+        res = least_squares(residual, th0, dat, max_steps=max_steps, gtol=1e-10, ftol=1e-10, xtol=1e-8)
+        _, se, _, _ = covariance(res)
+        return res, se
+
+    return jax.vmap(one)(theta0, data)
+
+
+def _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau):
+    from pmpjax._wrist.donders import fit_donders_surface
+    from pmpjax._wrist.donders_recordings import DondersRecording
+    from pmpjax._wrist.orientation import rotvec_from_joint_angles
+
+    from ._donders import params_from_stiffness
+
+    if not isinstance(donders, DondersRecording):
+        raise TypeError(f"`donders` must be a pmpjax.DondersRecording (pmpjax.read_recordings), got "
+                        f"{type(donders).__name__}")
+    missing = [s for s in analysis.subjects if s not in donders.subjects]
+    if missing:
+        raise ValueError(f"`donders` has no session for subject(s) {missing} of the analysis")
+    KJ, q_rest = _check_params(analysis, KJ, q_rest)
+    data, _, _, Tbar, has, J = _item_data(analysis, KJ, q_rest, False)
+    S = len(analysis.subjects)
+    t0 = Tbar / 5 if tau0 is None else np.broadcast_to(np.asarray(tau0, float), (S,))
+    t1 = Tbar / 5 if tau is None else np.broadcast_to(np.asarray(tau, float), (S,))
+    if not (np.all(np.isfinite(t0) & (t0 > 0)) and np.all(np.isfinite(t1) & (t1 > 0))):
+        raise ValueError("`tau0` and `tau` must be positive scalars or (S,) arrays [s]")
+    idx = [donders.subjects.index(s) for s in analysis.subjects]
+    x, q_obs, mask = donders.pointing[idx], donders.joint_angles[idx], donders.mask[idx]
+    N = x.shape[1]
+    Np = max(64, 1 << (N - 1).bit_length())
+    pad = lambda a: np.concatenate([a, np.zeros((S, Np - N) + a.shape[2:])], 1)  # noqa: E731
+    x, q_obs, w_obs = pad(np.where(mask[..., None], x, 0.0)), pad(np.where(mask[..., None], q_obs, 0.0)), \
+        pad(mask.astype(float))
+    # Block weights 1/σ: torsion noise = thickness of the subject's Donders surface; path noise =
+    # the standard error of the mean normalised path (sd/√n, over the target radius).
+    thick = np.asarray(fit_donders_surface(np.asarray(rotvec_from_joint_angles(donders.joint_angles[idx])),
+                                           mask=mask).thickness)
+    with np.errstate(all="ignore"):
+        se_path = analysis.sd_path / np.sqrt(analysis.n_valid)[..., None, None] / analysis.radius
+        sig_p = np.sqrt(np.nanmean(se_path.reshape(S, -1) ** 2, axis=1))
+    sig_p = np.where(np.isfinite(sig_p) & (sig_p > 0), sig_p, np.nanmedian(sig_p) if np.isfinite(sig_p).any() else 1.0)
+    weights = np.stack([1.0 / np.maximum(thick, 1e-6), 1.0 / np.maximum(sig_p, 1e-9)], -1)
+    theta0 = np.concatenate([params_from_stiffness(KJ), q_rest, np.log(t0)[:, None], np.log(t1)[:, None]], -1)
+    jdata = dict(x=x, q_obs=q_obs, w_obs=w_obs, weights=weights, paths=data)
+    opts = (("threshold", analysis.threshold), ("n_samples", analysis.mean_path.shape[2]),
+            ("radius", analysis.radius), ("d", analysis.d), ("J", J))
+    return theta0, jdata, opts, has, Np
+
+
+def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=None, tau=None,
+                       max_steps: int = 50) -> PointingModelFit:
+    """Joint fit of ``KJ``, ``q_rest``, ``τ0`` and ``τ`` per subject to the Donders postures and
+    the pointing paths together (Levenberg–Marquardt through the equilibria and ``simulate``).
+
+    **Arguments:** ``analysis`` (``fitting.analyze_pointing``); ``donders`` the subjects'
+    Donders sessions (``pmpjax.DondersRecording``, matched by subject name); ``KJ`` (S, 3, 3),
+    ``q_rest`` (S, 3) starting values in the order of ``analysis.subjects`` (e.g.
+    ``fitting.fit_donders``); ``tau0``, ``tau``: starting values [s], scalar or (S,) (default
+    T̄/5; e.g. ``fitting.fit_time_constants``).
+
+    The residual stacks the torsion of every Donders posture (as ``fit_donders``) and the path
+    residual of :func:`fit_time_constants` (per-subject τ0, τ), each block divided by its noise
+    scale: the thickness of the subject's Donders surface, and the standard error of the mean
+    normalised paths. ``KJ`` keeps trace 4 (log-stiffness parameters as in ``fit_donders``).
+    Returns a :class:`PointingModelFit`.
+    """
+    check_positive_int("max_steps", max_steps)
+    theta0, jdata, opts, has, Np = _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau)
+    res, se = jax.device_get(_fit_joint(theta0, jax.tree_util.tree_map(jnp.asarray, jdata), opts=opts,
+                                        max_steps=int(max_steps), n_torsion=Np))
+    from ._donders import stiffness_from_params
+
+    x = np.asarray(res.x)
+    KJf = np.stack([np.asarray(stiffness_from_params(jnp.asarray(v[:5]), 3, 4.0)) for v in x])
+    r = np.asarray(res.residual)
+    w = jdata["weights"]
+    n_t = jdata["w_obs"].sum(1)
+    r_t, r_p = r[:, :Np] / w[:, :1], r[:, Np:] / w[:, 1:]
+    finite = np.isfinite(res.cost)
+    status = np.where(~has, int(Status.TOO_FEW_DATA), np.where(
+        ~finite, int(Status.NONFINITE), np.where(res.converged, int(Status.SUCCESSFUL), int(Status.MAX_STEPS))))
+    return PointingModelFit(
+        subjects=analysis.subjects, KJ=KJf, q_rest=x[:, 5:8], tau0=np.exp(x[:, 8]), tau=np.exp(x[:, 9]), params=x,
+        stderr=np.asarray(se), loss=np.asarray(res.cost), torsion_rms=np.sqrt(np.sum(r_t**2, 1) / n_t),
+        path_rms=np.sqrt(np.mean(r_p**2, 1)), weights=w, steps=np.asarray(res.steps), status=status,
+        converged=status == 0, param_names=JOINT_PARAMS,
     )

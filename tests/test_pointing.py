@@ -6,6 +6,8 @@ differences)."""
 import numpy as np
 import pytest
 import scipy.integrate
+import scipy.optimize
+import scipy.stats
 from _reference import arimoto, pmp_qdot, rx, ry, rz, shoelace, wrist_fk
 from scipy.spatial.transform import Rotation
 
@@ -141,11 +143,13 @@ N_TRIALS = 3
 
 @pytest.fixture(scope="module")
 def experiment(tmp_path_factory):
-    """2 Table subjects × 3 trials × 16 movements, τ0 = 0.3 T, τ = 0.12 T (not the paper's T/5),
-    mild trial-to-trial variability, written as CSV and read back (shared by the tests below)."""
+    """2 Table subjects × 3 trials × 16 movements, τ0 = 0.3 T, τ = 0.12 T (not the paper's T/5)
+    with one T per subject, mild trial-to-trial variability, written as CSV and read back (shared
+    by the tests below)."""
     out = tmp_path_factory.mktemp("pointing")
     ex = pj.synthetic_pointing_experiment(out, subjects=SUBJECTS, n_trials=N_TRIALS, tau0_ratio=0.3, tau_ratio=0.12,
-                                          duration_jitter=0.03, param_jitter=0.03, n_donders=200, seed=3)
+                                          target_spread=0.0, duration_jitter=0.03, param_jitter=0.03, n_donders=64,
+                                          seed=3)
     return ex, pj.read_pointing(ex.files["pointing"])
 
 
@@ -160,13 +164,13 @@ def _jac_np(q, h=1e-7):
 
 
 def reference_movement(KJ, q_rest, tau0, tau, q0, target, t_eval):
-    """The λ0-PMP movement by solve_ivp (DOP853, rtol 1e-10) of the NumPy field of _reference,
+    """The λ0-PMP movement by solve_ivp (DOP853, rtol 1e-9) of the NumPy field of _reference,
     with Eq 10's gain from the start posture: screen points (len(t_eval), 2)."""
     W = tau0 * KJ
     k = _eq10_gain(q0, KJ, W)
     gain = arimoto(k, tau)
     sol = scipy.integrate.solve_ivp(lambda t, q: pmp_qdot(q, t, target, KJ, q_rest, W, gain), (0.0, t_eval[-1]),
-                                    q0, t_eval=t_eval, method="DOP853", rtol=1e-10, atol=1e-12)
+                                    q0, t_eval=t_eval, method="DOP853", rtol=1e-9, atol=1e-11)
     return np.stack([wrist_fk(q) for q in sol.y.T])
 
 
@@ -174,7 +178,7 @@ def test_synthetic_experiment_samples_the_lambda0_pmp_at_120_hz(experiment):
     ex, rec = experiment
     tr = ex.truth
     assert rec.subjects == SUBJECTS and rec.trials("subj4") == (1, 2, 3)
-    assert ex.donders.subjects == SUBJECTS and ex.donders.quat.shape == (2, 200, 4)
+    assert ex.donders.subjects == SUBJECTS and ex.donders.quat.shape == (2, 64, 4)
     for s, k, j in [(0, 0, 0), (0, 2, 7), (1, 1, 12), (1, 2, 15)]:
         rows = rec.rows(SUBJECTS[s], k + 1)
         t = rec.time[rows]
@@ -386,3 +390,232 @@ def test_analysis_skips_bad_trials_names_them_and_goes_on():
         fitting.analyze_pointing(rec, iqr=-1)
     with pytest.raises(ValueError, match="`subject`"):
         an.subject_index("nobody")
+
+
+# --- end to end on the synthetic experiment ---------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def analysis(experiment):
+    return fitting.analyze_pointing(experiment[1])
+
+
+def _slsqp_posture(KJ, q_rest, target):
+    res = scipy.optimize.minimize(
+        lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), q_rest, jac=lambda q: KJ @ (q - q_rest),
+        constraints=[{"type": "eq", "fun": lambda q: wrist_fk(q) - target}], method="SLSQP",
+        options={"ftol": 1e-14, "maxiter": 300})
+    assert res.success
+    return res.x
+
+
+@pytest.fixture(scope="module")
+def noiseless(experiment):
+    """A_net (S, 16) of the generating model without noise or jitter, by the paper's convention
+    (cut at 20 % of peak speed, widened by half a 120 Hz sample at each end, line through the cut
+    path's ends), from solve_ivp of the NumPy λ0-PMP field and polygon areas: no pmpjax code."""
+    from _reference import polygon_areas
+
+    ex, _ = experiment
+    tr = ex.truth
+    tg = pj.center_out_targets()
+    out = np.zeros((len(SUBJECTS), 16))
+    for s in range(len(SUBJECTS)):
+        for j, lab in enumerate(pj.MOVEMENT_LABELS):
+            way, d = lab.split("-")
+            p0, p1 = (tg["C"], tg[d]) if way == "out" else (tg[d], tg["C"])
+            KJ, qr, tau0, tau = tr["KJ"][s], tr["q_rest"][s], tr["tau0"][s, j], tr["tau"][s, j]
+            q0 = _slsqp_posture(KJ, qr, p0)
+            t = np.linspace(0.0, 2.0 * tr["T"][s, j], 3001)
+            x = reference_movement(KJ, qr, tau0, tau, q0, p1, t)
+            v = np.linalg.norm(np.gradient(x, t, axis=0), axis=1)
+            on, off = np.flatnonzero(v >= 0.2 * v.max())[[0, -1]]
+            half = int(round(0.5 / 120 / (t[1] - t[0])))
+            seg = x[on - half:off + half + 1]
+            a_r, a_l = polygon_areas(seg[1:-1], seg[0], seg[-1])
+            out[s, j] = (a_r - a_l) / RADIUS**2
+    return out
+
+
+def test_pipeline_a_net_agrees_with_the_noiseless_model(analysis, noiseless, experiment):
+    ex, _ = experiment
+    measured = np.array([[np.mean(a[np.isfinite(a)]) for a in row] for row in analysis.a_net])
+    span = noiseless.max() - noiseless.min()
+    assert span > 0.03  # Table subjects curve: the metric has a range to compare against
+    assert np.max(np.abs(measured - noiseless)) < 0.05 * span
+    # The Donders-fitted prediction at the generating parameters, analysed like the data.
+    pr = fitting.predict_pointing(analysis, ex.truth["KJ"], ex.truth["q_rest"], tau0=ex.truth["tau0"],
+                                  tau=ex.truth["tau"])
+    assert np.all(pr.status == 0) and np.max(np.abs(pr.a_net - noiseless)) < 0.05 * span
+    np.testing.assert_allclose(pr.duration, analysis.T, rtol=0.06)
+
+
+def test_predictions_and_captured_counts_equal_a_direct_scipy_computation(analysis, experiment):
+    ex, _ = experiment
+    pr = fitting.predict_pointing(analysis, ex.truth["KJ"], ex.truth["q_rest"])  # the paper's τ = τ0 = T/5
+    np.testing.assert_allclose(pr.tau0, analysis.T / 5) and np.testing.assert_allclose(pr.tau, analysis.T / 5)
+    assert np.all(pr.status == 0) and pr.path.shape == (2, 16, 20, 2) and pr.q_path.shape == (2, 16, 20, 3)
+    for s in range(2):
+        count = 0
+        for j in range(16):
+            a = analysis.a_net[s, j][analysis.valid[s, j]]
+            p = scipy.stats.ttest_1samp(a, pr.a_net[s, j]).pvalue if a.size >= 2 else np.nan
+            assert (np.isnan(p) and np.isnan(pr.p_model[s, j])) or pr.p_model[s, j] == pytest.approx(p, rel=1e-12)
+            count += bool(p >= 0.05)
+        assert pr.n_captured[s] == count and pr.share_captured[s] == count / 16
+    # Eq 10 gain from the start posture, by NumPy: k = λ_max((J W⁻¹ Jᵀ)⁻¹) / τ0.
+    q0 = np.nanmean(analysis.rest_q[0, 3], axis=0)
+    W = pr.tau0[0, 3] * ex.truth["KJ"][0]
+    assert pr.k[0, 3] == pytest.approx(_eq10_gain(q0, ex.truth["KJ"][0], W), rel=1e-6)
+    assert "captures A_net of" in pr.table()
+    # Figures 5-8 with data and model: every movement drawn (solid data, dashed model).
+    import matplotlib.pyplot as plt
+
+    fig = fitting.plot_pointing_paths(analysis, pr, subject="subj4")
+    lines = fig.axes[0].get_lines()
+    styles = [ln.get_linestyle() for ln in lines]
+    assert styles.count("--") == 16 and styles.count("-") >= 15
+    for plot in (fitting.plot_pointing_curvature, fitting.plot_pointing_joints, fitting.plot_pointing_speed):
+        assert plot(analysis, pr, subject=1).axes
+    plt.close("all")
+
+
+def test_time_constants_recover_the_generating_values(analysis, experiment):
+    ex, _ = experiment
+    tr = ex.truth
+    tc = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"])
+    assert tc.converged.all() and tc.tau0.shape == (2,)
+    # Generated with τ0 = 0.3 T, τ = 0.12 T (one T per subject), not the paper's T/5.
+    np.testing.assert_allclose(tc.tau0, tr["tau0"][:, 0], rtol=0.05)
+    np.testing.assert_allclose(tc.tau, tr["tau"][:, 0], rtol=0.05)
+    assert np.all(np.isfinite(tc.stderr) & (tc.stderr > 0) & (tc.stderr < 0.1 * tc.tau0[:, None]))
+    pt = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"], per_target=True)
+    ok = analysis.n_valid >= 1
+    assert pt.tau0.shape == (2, 16) and pt.converged[ok].all() and (pt.status[~ok] == pj.Status.TOO_FEW_DATA).all()
+    err0 = np.abs(pt.tau0[ok] / tr["tau0"][ok] - 1)
+    err = np.abs(pt.tau[ok] / tr["tau"][ok] - 1)
+    assert np.median(err0) < 0.05 and np.median(err) < 0.08 and err0.max() < 0.2 and err.max() < 0.3
+
+
+def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, experiment):
+    """The joint fit of KJ, q_rest, τ0, τ to postures and paths, from the Donders-only start;
+    and its Jacobian — the derivatives of the path residual (hence of the path loss) and of the
+    torsion residual w.r.t. log-stiffness, q_rest, log τ0, log τ — against central differences."""
+    import jax
+
+    from fitting._time_constants import _fit_joint, _joint_inputs, _joint_residual
+
+    ex, _ = experiment
+    tr, d = ex.truth, ex.donders
+    don = fitting.fit_donders(pj.Wrist(), d.pointing, d.joint_angles, mask=d.mask, n_starts=1)
+    jf = fitting.fit_pointing_model(analysis, d, don.KJ, don.q_rest)
+    assert jf.converged.all() and jf.params.shape == (2, 10)
+    np.testing.assert_allclose(jf.tau0, tr["tau0"][:, 0], rtol=0.05)
+    np.testing.assert_allclose(jf.tau, tr["tau"][:, 0], rtol=0.05)
+    assert np.all(jf.torsion_rms < 1.3 * don.rms) and np.all(np.isfinite(jf.stderr))
+    # Jacobian of the compiled fit at its optimum vs central differences of the residual.
+    theta0, jdata, opts, _, Np = _joint_inputs(analysis, d, don.KJ, don.q_rest, None, None)
+    jdata = jax.tree_util.tree_map(np.asarray, jdata)
+    res, _ = _fit_joint(theta0, jax.tree_util.tree_map(jax.numpy.asarray, jdata), opts=opts, max_steps=50,
+                        n_torsion=Np)
+    one = jax.tree_util.tree_map(lambda a: a[0], jdata)
+    residual = jax.jit(_joint_residual(dict(opts), Np))
+    x = np.asarray(res.x[0])
+    Jac = np.asarray(res.jac[0])
+    r = np.asarray(residual(x, one))
+    np.testing.assert_allclose(r, np.asarray(res.residual[0]), rtol=1e-9, atol=1e-12)
+    for i, name in enumerate(fitting._time_constants.JOINT_PARAMS):
+        h = np.sqrt(np.finfo(float).eps) * max(1.0, abs(x[i]))
+        e = np.zeros(10)
+        e[i] = h
+        rp, rm = np.asarray(residual(x + e, one)), np.asarray(residual(x - e, one))
+        fd = (rp - rm) / (2 * h)
+        assert np.linalg.norm(Jac[:, i] - fd) <= 1e-5 * np.linalg.norm(fd) + 1e-8, name
+        # The path loss ½|r_path|²: its gradient J_pathᵀ r_path vs the difference quotient.
+        loss = lambda v: 0.5 * np.sum(v[Np:] ** 2)  # noqa: E731
+        g = Jac[Np:, i] @ r[Np:]
+        assert g == pytest.approx((loss(rp) - loss(rm)) / (2 * h), rel=1e-4, abs=1e-7), name
+        if i >= 5:  # q_rest and the time constants move the paths
+            assert np.linalg.norm(fd[Np:]) > 1e-3, name
+
+
+@pytest.mark.bad_input("fitting.predict_pointing", "fitting.fit_time_constants", "fitting.fit_pointing_model")
+def test_prediction_and_fit_reject_bad_input(handmade):
+    _, an = handmade
+    don = pj.synthetic_recordings(np.diag([1.0, 1.5, 1.5]), np.zeros(3), 10, names=["curved"])
+    with pytest.raises(ValueError, match=r"`donders` has no session for subject\(s\) \['straight'\]"):
+        fitting.fit_pointing_model(an, don, np.diag([1.0, 1.5, 1.5]), np.zeros(3))
+    with pytest.raises(TypeError, match="`donders` must be a pmpjax.DondersRecording"):
+        fitting.fit_pointing_model(an, {"curved": None}, np.diag([1.0, 1.5, 1.5]), np.zeros(3))
+    with pytest.raises(ValueError, match="`max_steps`"):
+        fitting.fit_pointing_model(an, don, np.diag([1.0, 1.5, 1.5]), np.zeros(3), max_steps=-1)
+    KJ, q = np.diag([1.0, 1.5, 1.5]), np.zeros(3)
+    with pytest.raises(TypeError, match="`analysis` must be a PointingAnalysis"):
+        fitting.predict_pointing("analysis", KJ, q)
+    with pytest.raises(ValueError, match=r"`KJ` must be \(3, 3\) or \(S, 3, 3\) with S = 2"):
+        fitting.predict_pointing(an, np.stack([KJ] * 3), q)
+    with pytest.raises(ValueError, match="`KJ` must be positive definite"):
+        fitting.fit_time_constants(an, -KJ, q)
+    with pytest.raises(ValueError, match="`q_rest` contains NaN"):
+        fitting.fit_time_constants(an, KJ, np.array([0.0, np.nan, 0.0]))
+    with pytest.raises(ValueError, match="`tau0` must be positive"):
+        fitting.predict_pointing(an, KJ, q, tau0=-0.1)
+    with pytest.raises(ValueError, match="`tau` must be a scalar, \\(S,\\) or \\(S, L\\)"):
+        fitting.predict_pointing(an, KJ, q, tau=np.ones(5))
+    with pytest.raises(TypeError, match="`per_target` must be a bool"):
+        fitting.fit_time_constants(an, KJ, q, per_target="yes")
+    with pytest.raises(ValueError, match="`max_steps`"):
+        fitting.fit_time_constants(an, KJ, q, max_steps=0)
+
+
+@pytest.mark.bad_input("fitting.fit_average_donders")
+def test_donders_routes_samples_and_the_papers_average_surface(experiment):
+    """KJ, q_rest from the Donders session: NIO on every sample (fitting.fit_donders) and the
+    paper's route, NIO on the average quadratic surface (fitting.fit_average_donders). Both must
+    reproduce the generating Donders law (torsion at held-out postures); the samples route also
+    its parameters within the spread of the flat directions."""
+    ex, _ = experiment
+    d, tr = ex.donders, ex.truth
+    # 64 samples and an 8 × 8 surface grid: one compiled NIO serves both routes.
+    fits = [fitting.fit_donders(pj.Wrist(), d.pointing, d.joint_angles, mask=d.mask, n_starts=1),
+            fitting.fit_average_donders(pj.Wrist(), d.pointing, d.joint_angles, mask=d.mask, grid=8, n_starts=1)]
+    held = np.stack(np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5)), -1).reshape(-1, 2)
+    for s in range(2):
+        q_true = np.stack([_slsqp_posture(tr["KJ"][s], tr["q_rest"][s], x) for x in held])
+        for fit in fits:
+            q_fit = np.asarray(pj.equilibrium_posture(pj.Wrist(), fit.KJ[s], fit.q_rest[s], held, q_init=q_true))
+            tors = np.asarray(pj.torsion_between(pj.wrist_rotation(q_true), pj.wrist_rotation(q_fit)))
+            assert np.rad2deg(np.sqrt(np.mean(tors**2))) < 0.5
+    assert fits[0].converged.all()
+    with pytest.raises(TypeError, match="`chain` must be a pmpjax.Wrist"):
+        fitting.fit_average_donders(pj.PlanarArm([1.0, 1.0]), d.pointing, d.joint_angles)
+    with pytest.raises(ValueError, match="`grid` must be >= 3"):
+        fitting.fit_average_donders(pj.Wrist(), d.pointing, d.joint_angles, grid=2)
+    with pytest.raises(ValueError, match="`postures` contains NaN"):
+        fitting.fit_average_donders(pj.Wrist(), d.pointing, np.full_like(d.joint_angles, np.nan))
+
+
+@pytest.mark.bad_input("fitting.plot_pointing_paths", "fitting.plot_pointing_curvature", "fitting.plot_pointing_joints",
+                       "fitting.plot_pointing_speed")
+def test_figures_without_a_model_and_bad_arguments(handmade):
+    import matplotlib.pyplot as plt
+
+    _, an = handmade
+    plots = (fitting.plot_pointing_paths, fitting.plot_pointing_curvature, fitting.plot_pointing_joints,
+             fitting.plot_pointing_speed)
+    for plot in plots:
+        assert plot(an, subject="curved").axes
+        with pytest.raises(ValueError, match="`subject` 'nobody' is not one of"):
+            plot(an, subject="nobody")
+        with pytest.raises(TypeError, match="`prediction` must be a PointingPrediction"):
+            plot(an, prediction=an)
+        with pytest.raises(TypeError, match="`analysis` must be a PointingAnalysis"):
+            plot(None)
+        with pytest.raises(ValueError, match="`alpha`"):
+            plot(an, alpha=2.0)
+    # Thick lines mark A_net ≠ 0 (the curved subject), thin ones the straight subject's.
+    widths = [ln.get_linewidth() for ln in fitting.plot_pointing_paths(an, subject=0).axes[0].get_lines()[:16]]
+    assert min(widths) == 3.0
+    with pytest.raises(ValueError, match="`labels` must name movements"):
+        fitting.plot_pointing_joints(an, labels=("out-X",))
+    plt.close("all")

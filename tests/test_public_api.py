@@ -25,6 +25,7 @@ NOT_ENTRY_POINTS = {
     "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
     "fitting.StiffnessFit", "fitting.PointingAnalysis", "fitting.PointingPrediction", "fitting.TimeConstantFit",
     "fitting.SweepResult",
+    "fitting.PointingModelFit",
 }
 
 

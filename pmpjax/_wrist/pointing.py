@@ -421,15 +421,24 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
                    manipulability=tr.manipulability[:B], status=tr.status[:B])
 
 
-def _time_grid(ratios, span=None):
-    """Static ``(span, dt)`` in units of T for time constants ``ratios`` = τ/T: the movement has
-    settled after ~8 of its slowest time constants; RK4 steps of at most 1/12 of the fastest
-    (relative error ~1e-5, far below IMU noise). The step count is rounded up to 100·2^k so that
-    experiments with similar time constants share one compilation."""
+#: Default simulation grid of pointing movements, in units of the movement's duration T: the
+#: 20 % offset of a model movement as slow as the data lies near s ≈ 1.1; 2.5 T leaves room for
+#: slower models and the smoothing kernel's reach (and lets a synthetic movement settle).
+MODEL_SPAN, MODEL_DT = 2.5, 0.01
+
+
+def model_grid(ratios, *, settle: bool = False):
+    """Static ``(span, dt)`` in units of T for time constants ``ratios`` = τ/T: the defaults
+    (:data:`MODEL_SPAN`, :data:`MODEL_DT`: one compiled simulation serves most experiments),
+    longer for slow movements (5 of the slowest time constant; 8 with ``settle``, for a movement
+    that must come to rest), and RK4 steps halved until they are at most a tenth of the fastest
+    time constant (relative error ~1e-5, far below IMU noise)."""
     rmax, rmin = float(np.max(ratios)), float(np.min(ratios))
-    span = float(np.ceil(max(2.0, 8.0 * rmax) * 2) / 2) if span is None else float(span)
-    n = 100 * 2 ** max(0, int(np.ceil(np.log2(span / (rmin / 12.0) / 100))))
-    return span, span / n
+    span = max(MODEL_SPAN, float(np.ceil((16.0 if settle else 10.0) * rmax) / 2))
+    dt = MODEL_DT
+    while dt > rmin / 10.0:
+        dt /= 2
+    return span, dt
 
 
 def _hermite(s, x, v, sq):
@@ -585,7 +594,7 @@ def synthetic_pointing_experiment(
     # Redundant (null-space) posture noise: the hand keeps its screen point, the torsion varies.
     q0 = q_settled + np.deg2rad(posture_noise_deg) * rng.normal(size=(S, K, L, 1)) * _nullspace_direction(q_settled)
 
-    span, dt = _time_grid(np.concatenate([trial_r0.ravel(), trial_r.ravel()]))
+    span, dt = model_grid(np.concatenate([trial_r0.ravel(), trial_r.ravel()]), settle=True)
     B = S * K * L
     tr = normalised_movements(np.broadcast_to(KJ[:, None, None], (S, K, L, 3, 3)).reshape(B, 3, 3),
                               np.broadcast_to(q_rest[:, None, None], (S, K, L, 3)).reshape(B, 3),
