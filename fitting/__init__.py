@@ -29,6 +29,10 @@ from ._ik.weights import ik_model_error as ik_model_error
 from ._optimise import LeastSquaresResult as LeastSquaresResult
 from ._optimise import covariance as covariance
 from ._optimise import least_squares as least_squares
+from ._reaching import ReachingFit as ReachingFit
+from ._reaching import ReachingPrediction as ReachingPrediction
+from ._reaching import fit_reaching as fit_reaching
+from ._reaching import predict_reaching as predict_reaching
 from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights
