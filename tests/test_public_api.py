@@ -22,7 +22,7 @@ NOT_ENTRY_POINTS = {
     "pj.Subject", "pj.Trajectory", "pj.HugmpSubject", "pj.DondersRecording",
     "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",
     "fitting.IKWeightsLMResult", "fitting.IKWeightsResult", "fitting.LeastSquaresResult",
-    "fitting.StiffnessFit",
+    "fitting.ReachingFit", "fitting.ReachingPrediction", "fitting.StiffnessFit",
 }
 
 
