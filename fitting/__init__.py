@@ -38,6 +38,10 @@ from ._pointing_plots import plot_pointing_curvature as plot_pointing_curvature
 from ._pointing_plots import plot_pointing_joints as plot_pointing_joints
 from ._pointing_plots import plot_pointing_paths as plot_pointing_paths
 from ._pointing_plots import plot_pointing_speed as plot_pointing_speed
+from ._reaching import ReachingFit as ReachingFit
+from ._reaching import ReachingPrediction as ReachingPrediction
+from ._reaching import fit_reaching as fit_reaching
+from ._reaching import predict_reaching as predict_reaching
 from ._springy_arm import BlendFit as BlendFit
 from ._springy_arm import StiffnessFit as StiffnessFit
 from ._springy_arm import fit_blend_weights as fit_blend_weights

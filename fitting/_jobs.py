@@ -281,3 +281,41 @@ def pointing(out: Path, log) -> dict:
         "p_sum": js(an.p_sum), "p_net": js(an.p_net), "p_hyst": js(an.p_hyst), "p_model": js(pr.p_model),
         "n_captured": pr.n_captured.tolist(), "share_captured": np.round(pr.share_captured, 4).tolist(),
     }
+
+
+def reaching_hugmp(out: Path, log) -> dict:
+    """Held-out prediction of the bundled HuG-MP movements (repetitions 8–10) by the λ0-PMP fitted
+    per subject on repetitions 1–7: the Donders-fitted model of the paper (``KJ``, ``q_rest`` from
+    the final postures, ``W = τ0 KJ``, ``τ = τ0 = T/5``; the trajectory stage runs in
+    ``benchmarks/reaching.py``), with every baseline; a CSV table and one figure per subject."""
+    import json
+    import time
+
+    import matplotlib.pyplot as plt
+
+    from ._reaching import fit_reaching, plot_reaching_subject, predict_reaching
+
+    t0 = time.perf_counter()
+    fit = fit_reaching([1, 2, 3, 4], max_steps=(40, 0))
+    pred = predict_reaching(fit, reps=(8, 9, 10))
+    pred.to_csv(out / "reaching_hugmp.csv")
+    rows = [r for r in pred.summary() if r["task"] == "all"]
+    (out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
+    figures = []
+    for s in dict.fromkeys(pred.subject.tolist()):
+        fig = plot_reaching_subject(pred, s, predictors=("model", "pinv_minjerk", "joint_minjerk_oracle"))
+        path = out / f"reaching_hugmp_{s}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        figures.append(path.name)
+    mean = {name: float(np.nanmean(b.rmse_deg)) for name, b in pred.predictors().items()}
+    log(f"reaching_hugmp: {len(pred.task)} held-out motions of {len(figures)} subjects, RMSE [deg] "
+        + ", ".join(f"{k} {v:.1f}" for k, v in mean.items()) + f", figures -> {out}")
+    return {
+        "subjects": list(fit.subjects), "status": fit.status.tolist(), "n_fitted_motions": fit.n_motions.tolist(),
+        "KJ": np.round(fit.KJ, 4).tolist(), "q_rest_deg": np.round(np.rad2deg(fit.q_rest), 2).tolist(),
+        "held_out_motions": int(len(pred.task)), "summary": rows, "mean_rmse_deg": mean,
+        "mean_final_error_deg": {name: float(np.nanmean(b.final_error_deg)) for name, b in pred.predictors().items()},
+        "table": "reaching_hugmp.csv", "figures": figures, "problems": pred.problems,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }

@@ -26,6 +26,7 @@ NOT_ENTRY_POINTS = {
     "fitting.StiffnessFit", "fitting.PointingAnalysis", "fitting.PointingPrediction", "fitting.TimeConstantFit",
     "fitting.SweepResult",
     "fitting.PointingModelFit",
+    "fitting.ReachingFit", "fitting.ReachingPrediction", "fitting.StiffnessFit",
 }
 
 

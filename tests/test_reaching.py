@@ -1,0 +1,377 @@
+"""Real human reaching (fitting.fit_reaching / predict_reaching) and the HuG-MP shoulder–elbow arm.
+
+References, all independent of pmpjax: the data README's forward-kinematics formula in NumPy
+(tests/_reference.py rotations) and its central differences; λ0-PMP movements of the arm
+integrated by SciPy ``solve_ivp`` (LSODA, tight tolerances) from a NumPy right-hand side
+(design §3.1, Eqs 3–10); the README's description of where the board targets lie; copies of the
+recordings whose held-out repetitions are replaced; central differences of the fit's residual.
+
+Compile budget: every fit here uses one configuration (Arimoto planner, ``W = τ0 KJ``, fitted
+time constants, one subject, a 16-motion bucket, 10 RK4 steps per sample), so stage 1 and stage 2
+of the fit compile once for the module.
+"""
+
+import shutil
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.io
+from _reference import rx, ry, rz
+from scipy.integrate import solve_ivp
+
+import fitting
+import pmpjax as pj
+from fitting import _reaching as R
+
+BUNDLED = R.hugmp_directory()
+CFG = R._Config("lambda0", "tau0_KJ", "fitted", 10)
+FIT = dict(model="lambda0", damping="tau0_KJ", time_constants="fitted", steps_per_sample=10)
+# board targets reached by each motion of tasks 1-4 (README: "R → 1 → 12 → R → 4 → 9 → R", ...)
+SEQUENCES = {1: "R 1 12 R 4 9 R", 2: "R 2 10 R 9 11 R", 3: "R 10 2 R 11 9 R", 4: "R 1 R 3 R 9 R 11 R"}
+
+
+# --- an independent NumPy arm (the data README's formula) --------------------------------------
+
+
+def arm_fk(q, L1=0.30, L2=0.33):
+    """``p(q) = Rx(q1) Ry(q2) Rz(−q3) ([0, 0, −L1] + Ry(−q4) [0, 0, −L2])`` for one posture (4,)."""
+    q = np.asarray(q, float)
+    return rx(q[0]) @ ry(q[1]) @ rz(-q[2]) @ (np.array([0.0, 0.0, -L1]) + ry(-q[3]) @ np.array([0.0, 0.0, -L2]))
+
+
+def _rot_batch(axis, t):
+    c, s, o, z = np.cos(t), np.sin(t), np.ones_like(t), np.zeros_like(t)
+    rows = {0: [[o, z, z], [z, c, -s], [z, s, c]], 1: [[c, z, s], [z, o, z], [-s, z, c]],
+            2: [[c, -s, z], [s, c, z], [z, z, o]]}[axis]
+    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+
+
+def arm_fk_batch(Q, L1=0.30, L2=0.33):
+    """The same formula for postures (K, 4) at once (for the ODE right-hand side)."""
+    Q = np.asarray(Q, float)
+    v = np.array([0.0, 0.0, -L1]) + _rot_batch(1, -Q[:, 3]) @ np.array([0.0, 0.0, -L2])
+    R3 = _rot_batch(0, Q[:, 0]) @ _rot_batch(1, Q[:, 1]) @ _rot_batch(2, -Q[:, 2])
+    return np.einsum("kij,kj->ki", R3, v)
+
+
+def arm_jac_fd(q, h=1e-6):
+    """Central differences of the README formula (4 columns, one batched call)."""
+    E = h * np.eye(4)
+    X = arm_fk_batch(np.concatenate([q + E, q - E]))
+    return ((X[:4] - X[4:]) / (2 * h)).T
+
+
+def lambda0_qdot(q, t, x_d, KJ, q_rest, W, k, tau):
+    """λ0-PMP (design §3.1): ``q̇ = A (Jᵀ (F + λ0) − τ_el)``, ``λ0 = B J A τ_el``, Arimoto ``K(t)``."""
+    J = arm_jac_fd(q)
+    A = np.linalg.inv(W)
+    B = np.linalg.inv(J @ A @ J.T)
+    F = k * (1 - np.exp(-t / tau) - t / tau * np.exp(-t / tau)) * (x_d - arm_fk_batch(q[None])[0])
+    tau_el = KJ @ (q - q_rest)
+    return A @ (J.T @ (F + B @ J @ A @ tau_el) - tau_el)
+
+
+def lambda0_movement(q0, x_d, KJ, q_rest, tau, tau0, T_rec):
+    """λ0-PMP movement with ``W = τ0 KJ`` (Eq 7) and ``k = b_max(B(q0)) / τ0`` (Eq 10), integrated
+    by solve_ivp and sampled at 50 equally spaced times on [0, T_rec]."""
+    W = tau0 * KJ
+    J0 = arm_jac_fd(q0)
+    k = np.linalg.eigvalsh(np.linalg.inv(J0 @ np.linalg.inv(W) @ J0.T))[-1] / tau0
+    t = np.linspace(0.0, T_rec, R.SAMPLES)
+    sol = solve_ivp(lambda tt, q: lambda0_qdot(q, tt, x_d, KJ, q_rest, W, k, tau), (0.0, T_rec), q0,
+                    method="LSODA", t_eval=t, rtol=1e-10, atol=1e-12)
+    assert sol.success
+    return sol.y.T
+
+
+TRUTH = dict(
+    KJ=np.array([[0.7, 0.15, 0.0, 0.1], [0.15, 1.3, 0.1, 0.2], [0.0, 0.1, 0.8, -0.1], [0.1, 0.2, -0.1, 1.2]]),
+    q_rest=np.deg2rad([-30.0, -35.0, -5.0, 60.0]),
+    tau_over_T=0.12,
+    tau0_over_T=0.10,
+)
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    """12 λ0-PMP movements of the arm between postures in the HuG-MP ranges, as fit input."""
+    rng = np.random.default_rng(7)
+    lo, hi = np.deg2rad([-60, -70, -30, 40]), np.deg2rad([-10, -5, 10, 100])
+    q0s = rng.uniform(lo, hi, (12, 4))
+    targets = arm_fk_batch(rng.uniform(lo, hi, (12, 4)))
+    T = rng.uniform(0.8, 1.2, 12)
+    T_rec = 1.5 * T
+    q_obs = np.stack([lambda0_movement(q0, xd, TRUTH["KJ"], TRUTH["q_rest"], TRUTH["tau_over_T"] * t,
+                                       TRUTH["tau0_over_T"] * t, tr)
+                      for q0, xd, t, tr in zip(q0s, targets, T, T_rec)])
+    x_obs = arm_fk_batch(q_obs.reshape(-1, 4)).reshape(12, R.SAMPLES, 3)
+    n = len(T)
+    return R._Motions("SYN", np.ones(n, int), np.ones(n, int), np.arange(1, n + 1), q_obs, x_obs, T, T_rec)
+
+
+# --- the arm -----------------------------------------------------------------------------------
+
+
+def test_arm_matches_the_readme_formula(rng):
+    q = rng.uniform(-np.pi, np.pi, (200, 4))
+    for L1, L2 in ((0.30, 0.33), (0.27, 0.41)):
+        arm = pj.ShoulderElbowArm(L1=L1, L2=L2)
+        x, J = np.asarray(arm.fk(q)), np.asarray(arm.jacobian(q))
+        assert np.allclose(x, [arm_fk(v, L1, L2) for v in q], atol=1e-14)
+        h = np.sqrt(np.finfo(float).eps) * 1.0  # angles of order 1 rad
+        fd = np.stack([(arm_fk_batch(q + h * e, L1, L2) - arm_fk_batch(q - h * e, L1, L2)) / (2 * h)
+                       for e in np.eye(4)], -1)
+        assert np.allclose(J, fd, atol=1e-7)
+    assert pj.Arm4 is pj.ShoulderElbowArm and type(pj.Arm4()).__name__ == "ShoulderElbowArm"
+
+
+def test_elbow_rest_angle_is_invisible_to_the_lambda0_pmp(rng):
+    # Why the fit fixes q_rest[3]: shifting q_rest along KJ⁻¹ e4 changes no λ0-PMP velocity
+    # (here with a free, non-proportional W as well) because null-space motions keep the elbow.
+    KJ = TRUTH["KJ"]
+    W = np.diag([0.3, 0.1, 0.2, 0.25]) + 0.02
+    shift = np.linalg.solve(KJ, np.eye(4)[3]) * 0.7
+    for q in rng.uniform(np.deg2rad([-60, -70, -30, 40]), np.deg2rad([-10, -5, 10, 100]), (20, 4)):
+        x_d = arm_fk(q) + rng.normal(scale=0.05, size=3)
+        a = lambda0_qdot(q, 0.3, x_d, KJ, TRUTH["q_rest"], W, 5.0, 0.2)
+        b = lambda0_qdot(q, 0.3, x_d, KJ, TRUTH["q_rest"] + shift, W, 5.0, 0.2)
+        c = lambda0_qdot(q, 0.3, x_d, KJ, TRUTH["q_rest"] + np.roll(shift, 1), W, 5.0, 0.2)
+        assert np.allclose(a, b, atol=1e-9 * np.abs(a).max())
+        assert not np.allclose(a, c, atol=1e-3 * np.abs(a).max())  # other shifts are visible
+
+
+def test_recorded_hand_positions_cluster_per_board_target():
+    arm = pj.ShoulderElbowArm()
+    for s in (1, 2, 3, 4):
+        sub = pj.load_hugmp(s)
+        ends = {}
+        for task, seq in SEQUENCES.items():
+            seq = seq.split()
+            for _, i, q in sub.motions[task]:
+                if i < len(seq) and seq[i] != "R":
+                    ends.setdefault(int(seq[i]), []).append(q[-1])
+        pts = {k: R._fk(arm, np.array(v)) for k, v in ends.items()}  # one compiled (padded) call
+        cen = {k: p.mean(0) for k, p in pts.items()}
+        rms = {k: np.sqrt(np.mean(np.sum((p - cen[k]) ** 2, -1))) for k, p in pts.items()}
+        assert set(cen) == {1, 2, 3, 4, 9, 10, 11, 12}
+        assert max(rms.values()) < 0.045  # README: repeated reaches spread ≈ 2–4 cm RMS
+        # each reach lies nearer its own target's centroid than any other's (>= 90 %)
+        keys = sorted(cen)
+        C = np.stack([cen[k] for k in keys])
+        hits = [np.argmin(np.linalg.norm(C - x, axis=-1)) == keys.index(k) for k, p in pts.items() for x in p]
+        assert np.mean(hits) >= 0.9
+        # a board ≈ 0.53 m in front, columns 1→4 to the subject's right (−y), top row above bottom
+        assert 0.47 < C[:, 0].mean() < 0.59
+        for row in ((1, 2, 3, 4), (9, 10, 11, 12)):
+            y = np.array([cen[k][1] for k in row])
+            assert np.all(np.diff(y) < 0) and 0.07 < -np.diff(y).mean() < 0.13
+        dz = np.mean([cen[k][2] for k in (1, 2, 3, 4)]) - np.mean([cen[k][2] for k in (9, 10, 11, 12)])
+        assert 0.14 < dz < 0.26  # two row spacings of ≈ 0.10 m
+        assert 0.02 < np.mean([cen[k][2] for k in (1, 2, 3, 4)]) < 0.15  # top row ≈ 0.1 m above the shoulder
+
+
+# --- fitting on synthetic λ0-PMP movements ------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def synthetic_fit(synthetic):
+    return R._fit_motions([synthetic], CFG, max_steps=(40, 40))
+
+
+def test_synthetic_movements_have_ended(synthetic):
+    # fk(last sample) must be a faithful "recorded final hand position": the hand has stopped
+    assert synthetic.q_obs.shape == (12, 50, 4)
+    assert np.linalg.norm(np.diff(synthetic.x_obs[:, -2:], axis=1), axis=-1).max() < 2e-4
+
+
+def test_fit_recovers_known_parameters(synthetic, synthetic_fit):
+    out = synthetic_fit
+    p = {k: np.asarray(v) for k, v in R._unpack(jnp.asarray(out["x"][0]), CFG, out["elbow"][0]).items()}
+    KJ = TRUTH["KJ"] * 4 / np.trace(TRUTH["KJ"])
+    # the truth's rest posture in the fit's gauge: shifted along KJ⁻¹ e4 to the fixed elbow angle
+    d = np.linalg.solve(KJ, np.eye(4)[3])
+    q_rest = TRUTH["q_rest"] + (out["elbow"][0] - TRUTH["q_rest"][3]) / d[3] * d
+    assert out["converged"][0] and out["stage"] == 2 and out["steps2"][0] > 0
+    assert np.linalg.norm(p["KJ"] - KJ) / np.linalg.norm(KJ) < 0.05
+    assert np.linalg.norm(p["q_rest"] - q_rest) / np.linalg.norm(q_rest) < 0.05
+    assert abs(p["tau"] / TRUTH["tau_over_T"] - 1) < 0.05
+    assert abs(p["tau0"] / TRUTH["tau0_over_T"] - 1) < 0.05
+    # stage 1 alone (final postures) cannot pin KJ down from 12 movements; the trajectories do
+    KJ1 = np.asarray(R.stiffness_from_params(jnp.asarray(out["x1"][0, :9]), 4, 4.0))
+    assert np.linalg.norm(KJ1 - KJ) / np.linalg.norm(KJ) > 2 * np.linalg.norm(p["KJ"] - KJ) / np.linalg.norm(KJ)
+    # standard errors exist and are finite for every parameter
+    assert np.all(np.isfinite(out["se"][0])) and np.all(out["se"][0] > 0)
+
+
+def test_fit_jacobian_matches_central_differences(synthetic, synthetic_fit):
+    # the Levenberg–Marquardt Jacobian (forward mode through pj.simulate, as the fit uses it)
+    # against central differences of the residual, along random directions, away from the optimum
+    rng = np.random.default_rng(3)
+    theta = synthetic_fit["x"][0] + rng.normal(scale=0.02, size=synthetic_fit["x"][0].shape)
+    run = dict(max_steps=(0, 0), steps=synthetic_fit["steps_per_sample"])  # the fit's compiled stage 2
+    at = R._fit_motions([synthetic], CFG, theta0=theta[None], keep_jac=True, **run)
+    J = at["jac"][0]
+    assert np.all(np.isfinite(J))
+    h = np.sqrt(np.finfo(float).eps) * 1.0
+    for v in rng.normal(size=(3, theta.size)):
+        v /= np.linalg.norm(v)
+        rp, rm = (R._fit_motions([synthetic], CFG, theta0=(theta + sgn * h * v)[None], **run)["residual"][0]
+                  for sgn in (1, -1))
+        fd = (rp - rm) / (2 * h)
+        assert np.allclose(J @ v, fd, atol=2e-6 * np.abs(fd).max())
+
+
+# --- real recordings: the held-out split, predictions, bad input --------------------------------
+
+
+def _cells(path):
+    return scipy.io.loadmat(path)["tasks"]
+
+
+def _save(path, tasks):
+    scipy.io.savemat(path, {"tasks": tasks})
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """``clean``: a copy of S02; ``poisoned``: the same with repetitions 8-10 replaced by other,
+    valid motions; ``bad``: S02, S05 (empty cells and motions at the elbow stop), S06 (not a
+    MAT-file), no S07."""
+    root = tmp_path_factory.mktemp("hugmp")
+    clean, poisoned, bad = (root / n for n in ("clean", "poisoned", "bad"))
+    for d in (clean, poisoned, bad):
+        d.mkdir()
+        shutil.copy(BUNDLED / "S02_trajs.mat", d / "S02_trajs.mat")
+    tasks = _cells(BUNDLED / "S02_trajs.mat")
+    rng = np.random.default_rng(11)
+    for r in range(7, 10):
+        for t in range(6):
+            cell = tasks[r, t]
+            new = np.empty(cell.shape, object)
+            for i in range(cell.shape[0]):
+                a = cell[i, 0].astype(float)
+                new[i, 0] = a[:, ::-1] + rng.normal(scale=3.0, size=(4, 1))  # reversed, shifted
+            tasks[r, t] = new
+    _save(poisoned / "S02_trajs.mat", tasks)
+    empty = np.empty((10, 6), object)
+    for r in range(10):
+        for t in range(6):
+            empty[r, t] = np.zeros((0, 0))
+    stop = np.empty((1, 1), object)
+    u = np.linspace(0.0, 1.0, 80)
+    bell = u**3 * (10 - 15 * u + 6 * u**2)  # a well-formed reach, but with the elbow at its stop
+    stop[0, 0] = np.vstack([np.full(80, -20.0), -10 - 30 * bell, np.zeros(80), np.full(80, 126.0)])
+    empty[0, 0] = stop
+    _save(bad / "S05_trajs.mat", empty)
+    (bad / "S06_trajs.mat").write_bytes(b"this is not a MAT-file" * 10)
+    return dict(clean=clean, poisoned=poisoned, bad=bad)
+
+
+SMALL = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 0), **FIT)
+
+
+@pytest.fixture(scope="module")
+def clean_fit(folders):
+    return fitting.fit_reaching([2], directory=folders["clean"], **SMALL)
+
+
+def test_held_out_repetitions_never_enter_the_fit(folders, clean_fit, monkeypatch):
+    seen = []
+    stack = R._stack_motions
+    monkeypatch.setattr(R, "_stack_motions", lambda ms, **kw: (seen.extend(np.concatenate([m.rep for m in ms])),
+                                                                  stack(ms, **kw))[1])
+    poisoned = fitting.fit_reaching([2], directory=folders["poisoned"], **SMALL)
+    assert seen and set(seen) <= {1, 2}
+    for name in ("KJ", "q_rest", "W", "params", "loss", "stderr", "ik_weights", "mean_posture", "status"):
+        np.testing.assert_array_equal(getattr(poisoned, name), getattr(clean_fit, name), err_msg=name)
+    assert clean_fit.n_motions[0] == 12 and clean_fit.status[0] in (0, int(pj.Status.MAX_STEPS))
+    # the poison is real: the held-out rows that predict_reaching reads differ
+    a = fitting.predict_reaching(clean_fit, reps=(8,))
+    b = fitting.predict_reaching(poisoned, reps=(8,))
+    assert a.q_obs.shape == b.q_obs.shape and not np.allclose(a.q_obs, b.q_obs)
+
+
+def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
+    pr = fitting.predict_reaching(clean_fit, reps=(8, 9, 10))
+    N = len(pr.task)
+    assert N > 0 and set(pr.rep) <= {8, 9, 10} and set(pr.task) == {1} and set(pr.subject) == {"S02"}
+    assert pr.q_obs.shape == pr.q_pred.shape == (N, 50, 4) and pr.final_error_deg.shape == pr.rmse_deg.shape == (N,)
+    assert set(pr.baselines) == set(R.BASELINES)
+    # q_obs is the recording: its first and last samples are the recorded first and last postures
+    raw = {(r, i): q for r, i, q in pj.load_hugmp(2, folders["clean"]).motions[1]}
+    for k in range(N):
+        q = raw[(pr.rep[k], pr.index[k])]
+        assert np.array_equal(pr.q_obs[k, -1], q[-1]) and np.array_equal(pr.q_obs[k, 0], q[0])
+    d = np.rad2deg(pr.q_pred - pr.q_obs)
+    assert np.allclose(pr.rmse_deg, np.sqrt(np.mean(d**2, axis=(1, 2))))
+    assert np.allclose(pr.final_error_deg, np.sqrt(np.mean(d[:, -1] ** 2, -1)))
+    assert np.all(pr.status == 0) and np.all(pr.q_pred[:, 0] == pr.q_obs[:, 0])
+    # the λ0-PMP pulls the hand to the recorded final hand position (its Eq 10 dynamics need not
+    # have finished by the end of the recording); the straight-line baseline gets there exactly
+    target = np.asarray(pj.Arm4().fk(pr.q_obs[:, -1]))
+    dist = np.linalg.norm(target - pr.x_obs[:, 0], axis=-1)
+    miss = np.linalg.norm(pr.x_pred[:, -1] - target, axis=-1)
+    assert np.all(miss < 0.25 * dist) and np.median(miss / dist) < 0.05
+    b = pr.baselines["pinv_minjerk"]
+    assert np.all(b.status == 0) and np.abs(b.x_pred[:, -1] - target).max() < 1e-3
+    # ... along a straight hand path (distance from the start–target line below 1 mm)
+    x0, x1 = pr.x_obs[:, :1], target[:, None]
+    u = (x1 - x0) / np.linalg.norm(x1 - x0, axis=-1, keepdims=True)
+    off = (b.x_pred - x0) - np.sum((b.x_pred - x0) * u, -1, keepdims=True) * u
+    assert np.linalg.norm(off, axis=-1).max() < 1e-3
+    o = pr.baselines["joint_minjerk_oracle"]
+    assert np.all(o.final_error_deg < 1e-12) and np.all(o.rmse_deg > 0)
+    assert np.all(np.isfinite(pr.baselines["ik_weights_minjerk"].rmse_deg))
+    assert np.all(np.isfinite(pr.baselines["lambda0_unfitted"].rmse_deg))
+    rows = pr.summary()
+    assert {r["predictor"] for r in rows} == {"model", *R.BASELINES} and all(r["n"] > 0 for r in rows)
+    pr.to_csv(tmp_path / "p.csv")
+    assert len((tmp_path / "p.csv").read_text().splitlines()) == 1 + 5 * N
+
+
+@pytest.mark.bad_input("fitting.fit_reaching", "fitting.predict_reaching", "pj.Arm4", "pj.ShoulderElbowArm")
+def test_bad_input(folders, clean_fit):
+    bad = folders["bad"]
+    cases = [
+        (dict(subjects=[]), ValueError, "`subjects`"),
+        (dict(subjects=[1.5]), TypeError, "`subjects`"),
+        (dict(subjects=[2, "S02"]), ValueError, "`subjects` has repeated"),
+        (dict(subjects=[2], reps=(0, 1)), ValueError, "`reps`"),
+        (dict(subjects=[2], reps=()), ValueError, "`reps`"),
+        (dict(subjects=[2], tasks=(7,)), ValueError, "`tasks`"),
+        (dict(subjects=[2], model="pmp9"), ValueError, "`model`"),
+        (dict(subjects=[2], damping="isotropic"), ValueError, "`damping`"),
+        (dict(subjects=[2], time_constants="free"), ValueError, "`time_constants`"),
+        (dict(subjects=[2], max_steps=(0, 3)), ValueError, "`max_steps`"),
+        (dict(subjects=[2], steps_per_sample=0), ValueError, "`steps_per_sample`"),
+        (dict(subjects=[2], directory=bad / "nowhere"), ValueError, "`directory`"),
+        (dict(subjects=[7], directory=bad), ValueError, "S07_trajs.mat"),  # missing file
+        (dict(subjects=[6], directory=bad), ValueError, "S06_trajs.mat.*not a MATLAB"),  # malformed
+        (dict(subjects=[5], directory=bad), ValueError, "S05: no usable motion.*mechanical stop"),
+    ]
+    for kwargs, err, match in cases:
+        with pytest.raises(err, match=match):
+            fitting.fit_reaching(**kwargs)
+    # one good subject among bad ones: clear messages, the good one goes on
+    with pytest.warns(UserWarning, match="S05: no usable motion"):
+        fit = fitting.fit_reaching([2, 5, 6, 7], directory=bad, **SMALL)
+    assert fit.subjects == ("S02", "S05", "S06", "S07")
+    assert list(fit.status[1:]) == [int(pj.Status.TOO_FEW_DATA), int(pj.Status.INVALID_INPUT),
+                                    int(pj.Status.INVALID_INPUT)]
+    assert set(fit.problems) == {"S05", "S06", "S07"} and np.all(np.isnan(fit.KJ[1:]))
+    np.testing.assert_allclose(fit.KJ[0], clean_fit.KJ[0], rtol=1e-9)
+    pr = fitting.predict_reaching(fit, reps=(8,))
+    assert set(pr.subject) == {"S02"} and {"S05", "S06", "S07"} <= set(pr.problems)
+    with pytest.raises(ValueError, match="`reps`.*overlap"):
+        fitting.predict_reaching(clean_fit, reps=(2, 8))
+    with pytest.raises(TypeError, match="`fit`"):
+        fitting.predict_reaching({"KJ": 1})
+    for make, match in ((lambda: pj.Arm4(L1=-0.3), "L1"), (lambda: pj.ShoulderElbowArm(L2=np.nan), "L2"),
+                        (lambda: pj.ShoulderElbowArm().fk(np.zeros(3)), "`q`")):
+        with pytest.raises(ValueError, match=match):
+            make()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a clean fit warns about nothing
+        fitting.fit_reaching([2], directory=folders["clean"], **SMALL)
