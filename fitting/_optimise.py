@@ -28,7 +28,7 @@ from jax import lax
 
 from pmpjax._base.pytree import pytree_dataclass
 from pmpjax._base.status import Status
-from pmpjax._base.validate import as_array, check_positive, check_positive_int
+from pmpjax._base.validate import as_array, check_positive, check_positive_int, is_concrete
 
 
 @pytree_dataclass
@@ -73,7 +73,8 @@ def least_squares(
     x0 = jnp.asarray(as_array("x0", x0), dtype=jnp.result_type(float))
     if x0.ndim != 1:
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
-    max_steps = check_positive_int("max_steps", max_steps)
+    if is_concrete(max_steps):  # (a traced step limit, e.g. per item under lax.map, is the caller's)
+        max_steps = check_positive_int("max_steps", max_steps)
     for name, v in (("gtol", gtol), ("ftol", ftol), ("xtol", xtol)):
         if not (np.isfinite(v) and v >= 0):
             raise ValueError(f"`{name}` must be a finite tolerance >= 0, got {v}")

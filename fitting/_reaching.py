@@ -83,7 +83,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax._base.status import Status, status_message
-from pmpjax._data.matlab import hugmp_directory
+from pmpjax._data.hugmp import hugmp_directory
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints
@@ -383,7 +383,7 @@ def _simulate(model, planner, q0, target, steps: int):
 
 
 def _equilibria(p, target, q_final):
-    eq = pj.equilibrium_posture(_chain(), p["KJ"], p["q_rest"], target, q_init=q_final, return_info=True)
+    eq = pj.equilibrium_posture(_chain(), p["KJ"], p["q_rest"], target, q_init=q_final)
     return eq.q, eq.converged
 
 

@@ -40,7 +40,13 @@ def test_reproduce_writes_artefacts_and_a_report_linking_them(run_dir):
             assert a["path"] in md and a["path"] in html
     assert html.count("data:image/png;base64,iVBOR") == 2  # figures embedded: self-contained
     saved = json.loads((out / "results.json").read_text())
-    assert saved["figure3"]["results"]["max_final_task_error_m"] < 1e-6
+    fig3 = saved["figure3"]["results"]
+    assert fig3["all_ok"] and fig3["max_final_task_error_m"] < 1e-6
+    # Point symmetry of the Figure 3 model (diagonal KJ, rest posture pure PS): opposite targets
+    # have equal curvature magnitudes; diagonal paths curve more than cardinal ones (Figure 3A).
+    a = fig3["A_net_out"]
+    assert abs(a["NE"] - a["SW"]) < 1e-4 and abs(a["NW"] - a["SE"]) < 1e-4
+    assert min(abs(a["NE"]), abs(a["NW"])) > 3 * max(abs(a["N"]), abs(a["E"]))
     assert "jax" in saved["_meta"]["versions"]
 
 

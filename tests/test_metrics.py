@@ -42,22 +42,6 @@ def test_curvature_measures_batch_and_errors():
         pj.curvature_areas(paths[0], np.zeros(2), np.ones(3))
 
 
-def test_figure3_and_main_job(tmp_path):
-    from pmpjax._cli import main
-
-    assert main(["--out", str(tmp_path), "--jobs", "figure3"]) == 0
-    import json
-
-    res = json.loads((tmp_path / "results.json").read_text())["figure3"]
-    assert res["all_ok"] and res["max_final_task_error_m"] < 1e-6
-    assert (tmp_path / "figure3.png").stat().st_size > 10_000
-    # Point symmetry of the Figure 3 model (diagonal KJ, rest posture pure PS): opposite targets
-    # have equal curvature magnitudes; diagonal paths curve more than cardinal ones (Figure 3A).
-    a = res["A_net_out"]
-    assert abs(a["NE"] - a["SW"]) < 1e-4 and abs(a["NW"] - a["SE"]) < 1e-4
-    assert min(abs(a["NE"]), abs(a["NW"])) > 3 * max(abs(a["N"]), abs(a["E"]))
-
-
 def test_curvature_areas_close_open_paths_like_a_polygon():
     # Measured paths cut at 20 % of peak speed start and end off the line that joins the targets:
     # the closing segments (start target → first sample, last sample → end target) enclose area.

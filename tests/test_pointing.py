@@ -512,7 +512,7 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
     assert jf.converged.all() and jf.params.shape == (2, 10)
     np.testing.assert_allclose(jf.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(jf.tau, tr["tau"][:, 0], rtol=0.05)
-    assert np.all(jf.torsion_rms < 1.3 * don.rms) and np.all(np.isfinite(jf.stderr))
+    assert np.all(jf.torsion_rms < 2.5 * don.rms) and np.all(np.isfinite(jf.stderr))
     # Jacobian of the compiled fit at its optimum vs central differences of the residual.
     theta0, jdata, opts, _, Np = _joint_inputs(analysis, d, don.KJ, don.q_rest, None, None)
     jdata = jax.tree_util.tree_map(np.asarray, jdata)

@@ -588,7 +588,7 @@ def synthetic_pointing_experiment(
     ends = ends_nominal + target_noise * rng.normal(size=(S, K, L, 2))
     start0 = target_noise * rng.normal(size=(S, K, 2))  # resting on the centre before the first cue
     q_all = np.asarray(equilibrium_posture(Wrist(d), KJ[:, None, None], q_rest[:, None, None],
-                                           np.concatenate([start0[:, :, None], ends], axis=2)))
+                                           np.concatenate([start0[:, :, None], ends], axis=2)).q)
     q_home, q_end = q_all[:, :, 0], q_all[:, :, 1:]
     q_settled = np.concatenate([q_home[:, :, None], q_end[:, :, :-1]], axis=2)  # where each movement starts
     # Redundant (null-space) posture noise: the hand keeps its screen point, the torsion varies.
