@@ -193,7 +193,89 @@ def _ik_weights(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- analyze-pointing
+
+
+def add_analyze_pointing(sub) -> None:
+    p = sub.add_parser(
+        "analyze-pointing", help="analyse a wrist-pointing recording (curvature, t-tests; with a Donders "
+        "session: the Donders-fitted λ0-PMP's predictions and fitted time constants)",
+        description="Section 2 'Data Analysis' of Tommasino & Campolo (2017) on a pointing recording (CSV or "
+        "NPZ, see pmpjax.read_pointing): segmentation at 20 %% of peak speed, curvature A_sum/A_net, "
+        "hysteresis, t-tests. With --donders (a Donders recording of the same subjects): KJ and q_rest by "
+        "NIO, every movement predicted with τ = τ0 = T/5, captured counts, and τ0, τ fitted per subject.",
+    )
+    p.add_argument("file", help="pointing recording (.csv or .npz)")
+    p.add_argument("--donders", help="Donders recording of the same subjects (.csv or .npz)")
+    p.add_argument("--out", default="out_pointing", help="output folder (default out_pointing)")
+    p.add_argument("--starts", type=int, default=2, help="LM starts per subject of the Donders fit (default 2)")
+    p.add_argument("--no-figures", action="store_true", help="no Figures 5-8")
+    p.set_defaults(func=_analyze_pointing)
+
+
+def _analyze_pointing(args) -> int:
+    _x64()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    import pmpjax as pj
+
+    from ._donders import fit_donders
+    from ._pointing import analyze_pointing, predict_pointing
+    from ._pointing_plots import plot_pointing_curvature, plot_pointing_joints, plot_pointing_paths, plot_pointing_speed
+    from ._time_constants import fit_time_constants
+
+    rec = pj.read_pointing(args.file)
+    don = pj.read_recordings(args.donders) if args.donders else None
+    if don is not None:
+        missing = [s for s in rec.subjects if s not in don.subjects]
+        if missing:
+            raise ValueError(f"{args.donders}: no Donders session for subject(s) {missing} of {args.file}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    an = analyze_pointing(rec)
+    text = an.table()
+    pred, tc = None, None
+    if don is not None:
+        fit = fit_donders(pj.Wrist(d=float(don.d)), don.pointing, pj.joint_angles_from_quat(don.quat), mask=don.mask,
+                          n_starts=args.starts)
+        order = [list(don.subjects).index(s) for s in an.subjects]
+        KJ, q_rest = np.asarray(fit.KJ)[order], np.asarray(fit.q_rest)[order]
+        heuristic = predict_pointing(an, KJ, q_rest)
+        tc = fit_time_constants(an, KJ, q_rest)
+        pred = predict_pointing(an, KJ, q_rest, tau0=tc.tau0, tau=tc.tau)
+        text += "\n\nτ = τ0 = T/5:\n" + heuristic.table() + "\n\nfitted τ0, τ:\n" + pred.table()
+        _write_csv(out / "time_constants.csv", [
+            {"subject": s, "donders_status": pj.status_message(int(fit.status[order[i]])),
+             "tau0_s": f"{tc.tau0[i]:.6g}", "tau_s": f"{tc.tau[i]:.6g}", "status": pj.status_message(int(tc.status[i])),
+             "captured_T5": int(heuristic.n_captured[i]), "captured_fitted": int(pred.n_captured[i])}
+            for i, s in enumerate(an.subjects)])
+    with np.errstate(all="ignore"):
+        mean_net, mean_sum = np.nanmean(an.a_net, axis=2), np.nanmean(an.a_sum, axis=2)
+    _write_csv(out / "pointing_statistics.csv", [
+        {"subject": s, "movement": lab, "n": int(an.n_valid[i, j]), "T_s": f"{an.T[i, j]:.6g}",
+         "A_sum": f"{mean_sum[i, j]:.6g}", "p_sum": f"{an.p_sum[i, j]:.4g}", "A_net": f"{mean_net[i, j]:.6g}",
+         "p_net": f"{an.p_net[i, j]:.4g}",
+         **({"A_net_model": f"{pred.a_net[i, j]:.6g}", "p_model": f"{pred.p_model[i, j]:.4g}"} if pred else {})}
+        for i, s in enumerate(an.subjects) for j, lab in enumerate(an.labels)])
+    (out / "pointing_statistics.txt").write_text(text + "\n")
+    (out / "excluded.txt").write_text("".join(f"{e}\n" for e in an.excluded))
+    if not args.no_figures:
+        for i, s in enumerate(an.subjects):
+            for tag, plot in (("figure5_paths", plot_pointing_paths), ("figure6_curvature", plot_pointing_curvature),
+                              ("figure7_joints", plot_pointing_joints), ("figure8_speed", plot_pointing_speed)):
+                fig = plot(an, pred, subject=i)
+                fig.savefig(out / f"{tag}_{s}.png", dpi=90)
+                plt.close(fig)
+    print(f"{len(an.subjects)} subjects, {int(an.valid.sum())} movements analysed, {len(an.excluded)} exclusions "
+          f"(excluded.txt); wrote {out / 'pointing_statistics.csv'}" + ("" if tc is None else ", time_constants.csv"))
+    return 0 if tc is None or bool(np.all(tc.converged)) else 1
+
+
 def add_commands(sub) -> None:
     """All of fitting's subcommands (registered as one entry point)."""
     add_fit_donders(sub)
     add_ik_weights(sub)
+    add_analyze_pointing(sub)

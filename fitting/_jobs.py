@@ -7,62 +7,78 @@ from pathlib import Path
 import numpy as np
 
 
-def ik_hugmp(out: Path, log) -> dict:
-    """IK weights of the bundled HuG-MP recordings per subject × task, with bootstrap intervals."""
-    import matplotlib.pyplot as plt
-
+def ik_hugmp(ctx) -> dict:
+    """IK weights of the bundled HuG-MP recordings per subject × task, with bootstrap intervals
+    (Khoramshahi et al. 2022 Algorithm 1, γ = 0.6, the elbow over-specified and fixed at 1)."""
     from ._ik.datasets import hugmp_ik_weights
     from ._ik.plots import plot_ik_weights
 
-    res = hugmp_ik_weights(n_boot=20, key=None)
+    subjects = (1, 2) if ctx.quick else (1, 2, 3, 4)
+    res = hugmp_ik_weights(subjects, n_boot=10 if ctx.quick else 100, key=None)
     w, lo, hi = (np.asarray(res[k]) for k in ("w", "lo", "hi"))
-    fig = plot_ik_weights(w, lo, hi, panels=[str(s) for s in res["subjects"]],
-                          groups=[f"task {k + 1}" for k in range(w.shape[1])])
-    fig.savefig(out / "ik_weights_hugmp.png", dpi=110)
-    plt.close(fig)
-    log(f"ik_hugmp: {w.shape[0]} subjects x {w.shape[1]} tasks, figure -> {out / 'ik_weights_hugmp.png'}")
+    names = [str(s) for s in res["subjects"]]
+    ctx.figure(plot_ik_weights(w, lo, hi, panels=names, groups=[f"task {k + 1}" for k in range(w.shape[1])]),
+               "ik_weights_hugmp.png",
+               "IK weights of the HuG-MP subjects per task (4-DoF arm; point estimate and 95 % bootstrap "
+               "interval over motions).", "Khoramshahi et al. (2022) Fig 6 shows weights of this kind per condition.")
+    rows = [{"subject": names[i], "task": k + 1, **{f"w{j + 1}": float(w[i, k, j]) for j in range(w.shape[-1])},
+             **{f"w{j + 1}_lo": float(lo[i, k, j]) for j in range(w.shape[-1])},
+             **{f"w{j + 1}_hi": float(hi[i, k, j]) for j in range(w.shape[-1])},
+             "status": int(np.asarray(res["status"])[i, k])}
+            for i in range(w.shape[0]) for k in range(w.shape[1])]
+    ctx.table(rows, "ik_weights_hugmp.csv", "IK weights per HuG-MP subject × task with 95 % bootstrap intervals.")
+    ctx.log(f"{w.shape[0]} subjects x {w.shape[1]} tasks")
     return {
-        "subjects": [str(s) for s in res["subjects"]],
-        "w": w.round(4).tolist(), "lo": lo.round(4).tolist(), "hi": hi.round(4).tolist(),
+        "subjects": names, "w": w.round(4).tolist(), "lo": lo.round(4).tolist(), "hi": hi.round(4).tolist(),
         "converged": np.asarray(res["converged"]).tolist(),
         "skipped_cells": {str(k): [str(c) for c in v] for k, v in res["skipped"].items()},
         "failed": {str(k): str(v) for k, v in res.get("failed", {}).items()},
     }
 
 
-def donders_nio(out: Path, log) -> dict:
+def donders_nio(ctx) -> dict:
     """NIO fits (KJ, q_rest) of the six Table 1–2 subjects from synthetic steady postures
-    (500 each, 0.5° orientation noise, seeded), with held-out torsion errors and a Donders plot."""
-    import matplotlib.pyplot as plt
-
+    (0.5° orientation noise, seeded), with held-out torsion errors and a Donders plot."""
     import pmpjax as pj
 
     from ._donders import donders_coefficients, fit_donders, params_from_stiffness, predicted_torsion
 
     names, KJ, q_rest = pj.paper_subjects()
-    rec = pj.synthetic_recordings(KJ, q_rest, 500, noise_deg=0.5, seed=0, names=names)
+    n = 200 if ctx.quick else 500
+    rec = pj.synthetic_recordings(KJ, q_rest, n, noise_deg=0.5, seed=ctx.seed, names=names)
     wrist = pj.Wrist()
-    res = fit_donders(wrist, rec.pointing, rec.joint_angles, mask=rec.mask, n_starts=2, seed=0)
+    res = fit_donders(wrist, rec.pointing, rec.joint_angles, mask=rec.mask, n_starts=2, seed=ctx.seed)
     held_out = np.stack(np.meshgrid(*(np.linspace(-0.3, 0.3, 7),) * 2), -1).reshape(-1, 2)
-    true_tx = np.asarray(predicted_torsion(wrist, KJ, q_rest, np.broadcast_to(held_out, (6,) + held_out.shape)))
-    fit_tx = np.asarray(predicted_torsion(wrist, res.KJ, res.q_rest, np.broadcast_to(held_out, (6,) + held_out.shape)))
+    grid = np.broadcast_to(held_out, (6,) + held_out.shape)
+    true_tx = np.asarray(predicted_torsion(wrist, KJ, q_rest, grid))
+    fit_tx = np.asarray(predicted_torsion(wrist, res.KJ, res.q_rest, grid))
     rms_deg = np.rad2deg(np.sqrt(np.mean((fit_tx - true_tx) ** 2, axis=-1)))
     surf_data = pj.fit_donders_surface(pj.rotvec_from_quat(rec.quat[0]))
     surf_model = pj.model_donders_surface(res.KJ[0], res.q_rest[0])[0]
     ax = pj.plot_donders(np.asarray(pj.rotvec_from_quat(rec.quat[0])), [surf_data, surf_model],
                          labels=["data surface", "fitted model"])
     ax.set_title(f"{names[0]}: Donders surface, synthetic data vs NIO fit")
-    ax.figure.savefig(out / "donders_subject1.png", dpi=110)
-    plt.close(ax.figure)
+    ctx.figure(ax.figure, "donders_subject1.png",
+               f"Donders surface of {names[0]}: {n} synthetic postures (0.5° noise), the quadratic surface "
+               "fitted to them and the surface of the NIO-fitted λ0-PMP.",
+               "Tommasino & Campolo (2017) Figure 2: measured and model Donders surfaces.")
     truth_c = np.stack([np.asarray(donders_coefficients(np.concatenate([params_from_stiffness(K), q]), 3))
                         for K, q in zip(KJ, q_rest)])
     z = np.einsum("spq,sq->sp", res.directions, res.coefficients - truth_c) / res.direction_stderr
     z_ident = np.where(res.identifiable, np.abs(z), 0.0).max(axis=-1)
-    log(f"donders_nio: converged {int(res.converged.sum())}/6, held-out torsion RMS "
-        f"{rms_deg.max():.3f}° max, coefficient error along identifiable directions "
-        f"{z_ident.max():.2f} SE max, figure -> {out / 'donders_subject1.png'}")
+    rows = [{"subject": nm, "status": int(res.status[i]), "residual_rms_deg": float(np.rad2deg(res.rms[i])),
+             "held_out_torsion_rms_deg": float(rms_deg[i]), "max_abs_z_identifiable": float(z_ident[i]),
+             **{f"KJ_{a}{b}": float(res.KJ[i, a, b]) for a in range(3) for b in range(a, 3)},
+             **{f"KJ_{a}{b}_true": float(KJ[i, a, b]) for a in range(3) for b in range(a, 3)}}
+            for i, nm in enumerate(names)]
+    ctx.table(rows, "donders_nio.csv",
+              "NIO fits of the six Table subjects: residual, held-out torsion error on a 7 × 7 grid of "
+              "pointing directions, and fitted vs true stiffness.",
+              "Tommasino & Campolo (2017) Tables 1–2 (the generating KJ and q_rest).")
+    ctx.log(f"converged {int(res.converged.sum())}/6, held-out torsion RMS {rms_deg.max():.3f}° max, "
+            f"coefficient error along identifiable directions {z_ident.max():.2f} SE max")
     return {
-        "subjects": list(names),
+        "subjects": list(names), "postures_per_subject": n,
         "converged": res.converged.tolist(),
         "KJ_true": KJ.round(4).tolist(), "KJ_fit": res.KJ.round(4).tolist(),
         "q_rest_true": q_rest.round(4).tolist(), "q_rest_fit": res.q_rest.round(4).tolist(),
@@ -73,14 +89,12 @@ def donders_nio(out: Path, log) -> dict:
     }
 
 
-def sweeps(out: Path, log) -> dict:
+def sweeps(ctx) -> dict:
     """Parameter sweeps (issue 14) at small size: the curvature map (``A_net`` per target over
     stiffness anisotropy × rest posture, figure) and a Donders-fit power analysis (how many
     postures per subject recover ``KJ``), both through ``fitting.sweep`` with a resumable store."""
     import functools
     import tempfile
-
-    import matplotlib.pyplot as plt
 
     import pmpjax as pj
 
@@ -89,17 +103,19 @@ def sweeps(out: Path, log) -> dict:
     from ._sweep_examples import curvature_row, donders_power_row, plot_curvature_map
 
     store = Path(tempfile.mkdtemp(prefix="pmpjax_sweeps_"))
-    anisotropy = np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
-    rest_ps = np.linspace(-15.0, 15.0, 7)
+    anisotropy = np.array([0.5, 1.0, 2.0]) if ctx.quick else np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
+    rest_ps = np.linspace(-15.0, 15.0, 3 if ctx.quick else 7)
     cmap = sweep(functools.partial(curvature_row, dt=0.01), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
                  chunk_size=16, out=store / "curvature", progress=False)
     a_net = cmap.outputs["A_net"].reshape(len(anisotropy), len(rest_ps), 8)
     fig = plot_curvature_map(anisotropy, rest_ps, a_net)
-    fig.savefig(out / "curvature_map.png", dpi=110)
-    plt.close(fig)
+    ctx.figure(fig, "curvature_map.png",
+               "Curvature map: A_net of the outbound λ0-PMP movement to each target over stiffness anisotropy "
+               "KJ[FE]/KJ[RUD] × rest pronation-supination.",
+               "Tommasino & Campolo (2017) Figure 3A: anisotropic stiffness curves the diagonal paths.")
 
     names, KJ, q_rest = pj.paper_subjects()
-    n_values, reps, n_max = [16, 64, 256], 8, 256
+    n_values, reps, n_max = ([16, 64], 2, 64) if ctx.quick else ([16, 64, 256], 8, 256)
     g = grid(subject=np.arange(len(names)), n_postures=n_values, rep=np.arange(reps))
     s = g["subject"]
     params = {"subject": np.asarray(names)[s], "logK": params_from_stiffness(KJ)[s], "q_rest": q_rest[s],
@@ -111,8 +127,12 @@ def sweeps(out: Path, log) -> dict:
     ok = ~power.failed.reshape(err.shape)
     rms = np.sqrt(np.nanmean(np.where(ok, err, np.nan) ** 2, axis=(0, 2)))
     within = {d: np.nanmean(np.where(ok, err < d, np.nan), axis=(0, 2)) for d in (0.1, 0.25, 0.5)}
-    log(f"sweeps: curvature map {cmap.outputs['A_net'].shape[0]} rows ({cmap.n_failed} failed), A_net "
-        f"{a_net.min():+.3f}..{a_net.max():+.3f}, figure -> {out / 'curvature_map.png'}; Donders power: "
+    ctx.table([{"n_postures": n, "rms_KJ_error": float(r), **{f"within_{d}": float(within[d][k]) for d in within}}
+               for k, (n, r) in enumerate(zip(n_values, rms))], "donders_power.csv",
+              f"Donders-fit power analysis: RMS stiffness error [Nm/rad] and share of fits within 0.1/0.25/0.5 "
+              f"Nm/rad over the six Table subjects × {reps} replicates, by postures per subject (0.5° noise).")
+    ctx.log(f"curvature map {cmap.outputs['A_net'].shape[0]} rows ({cmap.n_failed} failed), A_net "
+        f"{a_net.min():+.3f}..{a_net.max():+.3f}; Donders power: "
         + ", ".join(f"n={n}: RMS |ΔKJ| {r:.3f} Nm/rad, {100 * within[0.25][k]:.0f}% within 0.25"
                     for k, (n, r) in enumerate(zip(n_values, rms))))
     return {
@@ -231,91 +251,138 @@ def ik_synthetic(ctx) -> dict:
             "max_abs_error_vs_truth": err, "converged": int(np.asarray(res.converged).sum()), "items": int(P * C)}
 
 
-def pointing(out: Path, log) -> dict:
-    """The wrist-pointing experiment end to end on synthetic data (Tommasino & Campolo 2017,
-    Sections 2–3): six Table subjects × 5 trials × 16 movements written as a pointing recording
-    (CSV) with a Donders session each, read back, analysed (segmentation, curvature, t-tests),
-    KJ and q_rest fitted to the Donders sessions (NIO), every movement predicted by the
-    Donders-fitted λ0-PMP (τ = τ0 = T/5, Eq 10), compared (captured counts), Figures 5–8."""
-    import matplotlib.pyplot as plt
+def _js(a, digits=5):
+    """JSON rows of a 1-D/2-D array, NaN (no data, no test) as null."""
+    return [[round(float(v), digits) if np.isfinite(v) else None for v in row] for row in np.atleast_2d(a)]
 
+
+def pointing(ctx) -> dict:
+    """The wrist-pointing experiment end to end on synthetic data (Tommasino & Campolo 2017,
+    Sections 2–3): a center-out experiment of the Table subjects written as pointing recordings
+    (CSV) with a Donders session each, read back, analysed (segmentation, curvature, t-tests);
+    ``KJ``, ``q_rest`` fitted to the Donders sessions (NIO); every movement predicted by the
+    Donders-fitted λ0-PMP with the paper's ``τ = τ0 = T/5`` (Eq 10) and compared (captured
+    counts); ``τ0``, ``τ`` fitted by gradient descent through the simulator; Figures 5–8."""
     import pmpjax as pj
 
     from ._donders import fit_donders
     from ._pointing import analyze_pointing, predict_pointing
     from ._pointing_plots import plot_pointing_curvature, plot_pointing_joints, plot_pointing_paths, plot_pointing_speed
+    from ._time_constants import fit_time_constants
 
-    data_dir = out / "pointing_data"
-    ex = pj.synthetic_pointing_experiment(data_dir, n_trials=5, seed=0)
+    # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
+    # fitted time constants can be told apart.
+    # (--quick: two subjects, three trials, mild variability; the sizes of tests/test_pointing.py.)
+    opts = dict(subjects=("subj1", "subj4"), n_trials=3, target_spread=0.0, duration_jitter=0.03,
+                param_jitter=0.03, n_donders=64) if ctx.quick else dict(n_trials=10)
+    ex = pj.synthetic_pointing_experiment(ctx.out / "pointing_data", tau0_ratio=0.3, tau_ratio=0.12,
+                                          seed=ctx.seed, **opts)
     rec = pj.read_pointing(ex.files["pointing"])
     don = pj.read_recordings(ex.files["donders"])
     an = analyze_pointing(rec)
-    fit = fit_donders(pj.Wrist(), don.pointing, don.joint_angles, mask=don.mask, n_starts=2, seed=0)
+    fit = fit_donders(pj.Wrist(), don.pointing, don.joint_angles, mask=don.mask, n_starts=2, seed=ctx.seed)
     order = [don.subjects.index(s) for s in an.subjects]
-    pr = predict_pointing(an, fit.KJ[order], fit.q_rest[order])
-    table = an.table() + "\n\n" + pr.table()
-    (out / "pointing_statistics.txt").write_text(table + "\n")
-    for s, name in enumerate(an.subjects):
-        for tag, plot in (("figure5_paths", plot_pointing_paths), ("figure6_curvature", plot_pointing_curvature)):
-            fig = plot(an, pr, subject=s)
-            fig.savefig(out / f"pointing_{tag}_{name}.png", dpi=90)
-            plt.close(fig)
-    for tag, plot in (("figure7_joints", plot_pointing_joints), ("figure8_speed", plot_pointing_speed)):
-        fig = plot(an, pr, subject=0)
-        fig.savefig(out / f"pointing_{tag}_{an.subjects[0]}.png", dpi=90)
-        plt.close(fig)
-    log(f"pointing: {len(an.subjects)} subjects, {int(an.valid.sum())} movements analysed, "
-        f"{len(an.excluded)} exclusions; Donders fits converged {int(fit.converged.sum())}/{len(fit.converged)}; "
-        f"model captures {pr.n_captured.tolist()} of 16; figures and {out / 'pointing_statistics.txt'}")
+    KJ, q_rest = fit.KJ[order], fit.q_rest[order]
+    heuristic = predict_pointing(an, KJ, q_rest)
+    tc = fit_time_constants(an, KJ, q_rest)
+    fitted = predict_pointing(an, KJ, q_rest, tau0=tc.tau0, tau=tc.tau)
+    (ctx.out / "pointing_statistics.txt").write_text(an.table() + "\n\n" + heuristic.table() + "\n")
+
     with np.errstate(all="ignore"):
-        mean_net = np.nanmean(an.a_net, axis=2)
-
-    def js(a, digits=5):  # JSON: NaN (no data / no test) as null
-        return [[round(float(v), digits) if np.isfinite(v) else None for v in row] for row in np.atleast_2d(a)]
-
+        mean_net, sd_net = np.nanmean(an.a_net, axis=2), np.nanstd(an.a_net, axis=2, ddof=1)
+        mean_sum = np.nanmean(an.a_sum, axis=2)
+    rows = [{"subject": name, "movement": lab, "n": int(an.n_valid[s, j]), "T_s": float(an.T[s, j]),
+             "A_sum": float(mean_sum[s, j]), "p_sum": float(an.p_sum[s, j]),
+             "A_net": float(mean_net[s, j]), "A_net_sd": float(sd_net[s, j]), "p_net": float(an.p_net[s, j]),
+             "A_net_model_T5": float(heuristic.a_net[s, j]), "p_model_T5": float(heuristic.p_model[s, j]),
+             "A_net_model_fitted": float(fitted.a_net[s, j]), "p_model_fitted": float(fitted.p_model[s, j])}
+            for s, name in enumerate(an.subjects) for j, lab in enumerate(an.labels)]
+    ctx.table(rows, "pointing_statistics.csv",
+              "Per subject × movement: mean duration, curvature A_sum and A_net (normalised by (π/12)²) with "
+              "t-test p-values against 0, and the Donders-fitted model's A_net with the p-value of the measured "
+              "areas against it, for τ = τ0 = T/5 and for the fitted time constants.",
+              "Paper Results: the Donders-fitted model captures A_net in e.g. 6 of 16 movements (37 %).")
+    truth = ex.truth
+    ctx.table([{"subject": name, "tau0_s": float(tc.tau0[s]), "tau0_true_s": float(truth["tau0"][s, 0]),
+                "tau_s": float(tc.tau[s]), "tau_true_s": float(truth["tau"][s, 0]),
+                "tau0_stderr_s": float(tc.stderr[s, 0]), "tau_stderr_s": float(tc.stderr[s, 1]),
+                "status": int(tc.status[s]),
+                "captured_T5": int(heuristic.n_captured[s]), "captured_fitted": int(fitted.n_captured[s])}
+               for s, name in enumerate(tc.subjects)],
+              "pointing_time_constants.csv",
+              "Time constants fitted by Levenberg–Marquardt through the simulator (per subject, all 16 "
+              "movements), against the generating values, and the captured counts of the model with the "
+              "paper's T/5 heuristic and with the fitted values.",
+              "The paper sets τ = τ0 = T/5 by hand (Section 3).")
+    subjects = range(len(an.subjects)) if not ctx.quick else range(1)
+    for s in subjects:
+        name = an.subjects[s]
+        ctx.figure(plot_pointing_paths(an, fitted, subject=s), f"pointing_figure5_paths_{name}.png",
+                   f"{name}: mean outbound (blue) and inbound (red) screen paths ± sd, thick where A_net ≠ 0, "
+                   "stars where hysteresis is significant; the model with fitted time constants dashed.",
+                   "Paper Figure 5.", dpi=90)
+        ctx.figure(plot_pointing_curvature(an, fitted, subject=s), f"pointing_figure6_curvature_{name}.png",
+                   f"{name}: measured A_net (mean ± sd) per movement beside the model's; stars where they differ.",
+                   "Paper Figure 6.", dpi=90)
+    ctx.figure(plot_pointing_joints(an, fitted, subject=0), f"pointing_figure7_joints_{an.subjects[0]}.png",
+               f"{an.subjects[0]}: joint trajectories (PS, FE, RUD) of the E and W movements, model dashed.",
+               "Paper Figure 7.", dpi=90)
+    ctx.figure(plot_pointing_speed(an, fitted, subject=0), f"pointing_figure8_speed_{an.subjects[0]}.png",
+               f"{an.subjects[0]}: tangential speed profiles of all 16 movements, model dashed.",
+               "Paper Figure 8.", dpi=90)
+    ctx.log(f"{len(an.subjects)} subjects, {int(an.valid.sum())} movements analysed, {len(an.excluded)} "
+            f"exclusions; Donders fits converged {int(fit.converged.sum())}/{len(fit.converged)}; captured of 16: "
+            f"T/5 {heuristic.n_captured.tolist()}, fitted τ {fitted.n_captured.tolist()}; τ0 fit/true "
+            + ", ".join(f"{a:.3f}/{b:.3f}" for a, b in zip(tc.tau0, truth["tau0"][:, 0])))
     return {
         "subjects": list(an.subjects), "labels": list(an.labels),
         "movements_analysed": int(an.valid.sum()), "exclusions": len(an.excluded),
         "donders_converged": fit.converged.tolist(),
-        "T_s": js(an.T, 4), "A_net_data": js(mean_net), "A_net_model": js(pr.a_net),
-        "p_sum": js(an.p_sum), "p_net": js(an.p_net), "p_hyst": js(an.p_hyst), "p_model": js(pr.p_model),
-        "n_captured": pr.n_captured.tolist(), "share_captured": np.round(pr.share_captured, 4).tolist(),
+        "T_s": _js(an.T, 4), "A_net_data": _js(mean_net), "A_net_model_T5": _js(heuristic.a_net),
+        "A_net_model_fitted": _js(fitted.a_net),
+        "p_sum": _js(an.p_sum), "p_net": _js(an.p_net), "p_hyst": _js(an.p_hyst),
+        "n_captured_T5": heuristic.n_captured.tolist(), "n_captured_fitted": fitted.n_captured.tolist(),
+        "tau0_fit_s": tc.tau0.tolist(), "tau_fit_s": tc.tau.tolist(),
+        "tau0_true_s": truth["tau0"][:, 0].tolist(), "tau_true_s": truth["tau"][:, 0].tolist(),
+        "time_constants_converged": tc.converged.tolist(),
     }
 
 
-def reaching_hugmp(out: Path, log) -> dict:
-    """Held-out prediction of the bundled HuG-MP movements (repetitions 8–10) by the λ0-PMP fitted
-    per subject on repetitions 1–7: the Donders-fitted model of the paper (``KJ``, ``q_rest`` from
-    the final postures, ``W = τ0 KJ``, ``τ = τ0 = T/5``; the trajectory stage runs in
-    ``benchmarks/reaching.py``), with every baseline; a CSV table and one figure per subject."""
+def reaching(ctx) -> dict:
+    """Held-out prediction of the bundled HuG-MP arm movements (repetitions 8–10) by the λ0-PMP
+    fitted per subject on repetitions 1–7 (final postures through the equilibria, then joint
+    trajectories through ``simulate``), against every baseline; a table and one figure per subject."""
     import json
-    import time
-
-    import matplotlib.pyplot as plt
 
     from ._reaching import fit_reaching, plot_reaching_subject, predict_reaching
 
-    t0 = time.perf_counter()
-    fit = fit_reaching([1, 2, 3, 4], max_steps=(40, 0))
+    # --quick: one subject, task 1, repetitions 1-2, the Donders-fitted model only (final postures,
+    # as in the paper; no trajectory stage): the sizes of tests/test_reaching.py.
+    subjects = (2,) if ctx.quick else (1, 2, 3, 4)
+    opts = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 0), time_constants="fitted", steps_per_sample=10) \
+        if ctx.quick else dict(max_steps=(40, 25))
+    fit = fit_reaching(subjects, **opts)
     pred = predict_reaching(fit, reps=(8, 9, 10))
-    pred.to_csv(out / "reaching_hugmp.csv")
+    pred.to_csv(ctx.out / "reaching_hugmp_motions.csv")
     rows = [r for r in pred.summary() if r["task"] == "all"]
-    (out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
-    figures = []
+    ctx.table(rows, "reaching_hugmp.csv",
+              "Held-out HuG-MP motions (repetitions 8–10): mean final-posture error and joint-trajectory RMSE "
+              "[deg] per subject and predictor — the fitted λ0-PMP ('model'), straight minimum-jerk hand paths "
+              "through the plain and the IK-weighted pseudo-inverse, the unfitted λ0-PMP, and the joint-space "
+              "minimum-jerk oracle that knows the recorded final posture.",
+              "Not in the papers: the λ0-PMP tested on whole-arm reaching (issue 12).")
+    (ctx.out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
     for s in dict.fromkeys(pred.subject.tolist()):
-        fig = plot_reaching_subject(pred, s, predictors=("model", "pinv_minjerk", "joint_minjerk_oracle"))
-        path = out / f"reaching_hugmp_{s}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        figures.append(path.name)
+        ctx.figure(plot_reaching_subject(pred, s, predictors=("model", "pinv_minjerk", "joint_minjerk_oracle")),
+                   f"reaching_hugmp_{s}.png",
+                   f"{s}: recorded (solid) and predicted joint trajectories and hand paths of held-out motions.",
+                   dpi=90)
     mean = {name: float(np.nanmean(b.rmse_deg)) for name, b in pred.predictors().items()}
-    log(f"reaching_hugmp: {len(pred.task)} held-out motions of {len(figures)} subjects, RMSE [deg] "
-        + ", ".join(f"{k} {v:.1f}" for k, v in mean.items()) + f", figures -> {out}")
+    ctx.log(f"{len(pred.task)} held-out motions, RMSE [deg] " + ", ".join(f"{k} {v:.1f}" for k, v in mean.items()))
     return {
         "subjects": list(fit.subjects), "status": fit.status.tolist(), "n_fitted_motions": fit.n_motions.tolist(),
         "KJ": np.round(fit.KJ, 4).tolist(), "q_rest_deg": np.round(np.rad2deg(fit.q_rest), 2).tolist(),
         "held_out_motions": int(len(pred.task)), "summary": rows, "mean_rmse_deg": mean,
         "mean_final_error_deg": {name: float(np.nanmean(b.final_error_deg)) for name, b in pred.predictors().items()},
-        "table": "reaching_hugmp.csv", "figures": figures, "problems": pred.problems,
-        "seconds": round(time.perf_counter() - t0, 1),
+        "problems": pred.problems,
     }

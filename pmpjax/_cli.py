@@ -35,7 +35,7 @@ from pathlib import Path
 
 #: Order of the parts in a run and in the report (others follow alphabetically).
 PART_ORDER = (
-    "figure3", "donders_nio", "pointing", "time_constants", "ik_figures", "ik_synthetic", "ik_hugmp",
+    "figure3", "donders_nio", "pointing", "ik_figures", "ik_synthetic", "ik_hugmp",
     "reaching", "sweeps", "figure4", "primitives",
 )
 

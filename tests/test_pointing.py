@@ -583,7 +583,7 @@ def test_donders_routes_samples_and_the_papers_average_surface(experiment):
     for s in range(2):
         q_true = np.stack([_slsqp_posture(tr["KJ"][s], tr["q_rest"][s], x) for x in held])
         for fit in fits:
-            q_fit = np.asarray(pj.equilibrium_posture(pj.Wrist(), fit.KJ[s], fit.q_rest[s], held, q_init=q_true))
+            q_fit = np.asarray(pj.equilibrium_posture(pj.Wrist(), fit.KJ[s], fit.q_rest[s], held, q_init=q_true).q)
             tors = np.asarray(pj.torsion_between(pj.wrist_rotation(q_true), pj.wrist_rotation(q_fit)))
             assert np.rad2deg(np.sqrt(np.mean(tors**2))) < 0.5
     assert fits[0].converged.all()
@@ -619,3 +619,4 @@ def test_figures_without_a_model_and_bad_arguments(handmade):
     with pytest.raises(ValueError, match="`labels` must name movements"):
         fitting.plot_pointing_joints(an, labels=("out-X",))
     plt.close("all")
+

@@ -375,3 +375,21 @@ def test_bad_input(folders, clean_fit):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a clean fit warns about nothing
         fitting.fit_reaching([2], directory=folders["clean"], **SMALL)
+
+
+def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fit):
+    """`pmpjax reproduce --quick --only reaching` (the sizes of ``clean_fit``, bundled S02): the
+    table's numbers are the held-out errors of fitting.predict_reaching on the same fit."""
+    import csv
+
+    from pmpjax import _cli
+
+    res = _cli.reproduce(tmp_path, quick=True, only=["reaching"], progress=False, cache=False)["reaching"]
+    assert res["status"] == "ok", res.get("error")
+    assert (tmp_path / "reaching_hugmp_S02.png").read_bytes()[:4] == b"\x89PNG"
+    rows = {r["predictor"]: r for r in csv.DictReader((tmp_path / "reaching_hugmp.csv").open())}
+    assert set(rows) == {"model", *R.BASELINES}
+    pr = fitting.predict_reaching(clean_fit, reps=(8, 9, 10))  # the bundled S02 equals the clean copy
+    assert float(rows["model"]["rmse_deg"]) == pytest.approx(float(np.nanmean(pr.rmse_deg)), rel=1e-5)
+    assert float(rows["joint_minjerk_oracle"]["final_error_deg"]) < 1e-9
+    assert res["results"]["held_out_motions"] == len(pr.task)
