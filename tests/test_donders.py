@@ -200,11 +200,11 @@ def test_model_surface_and_torsion_gradients():
 
     sym = symmetric_directions(3)
     args = (K0, q0, grid[[1, 5]] * 0.9)
-    f = jax.jit(loss)
-    grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(*args)
+    vg = jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2)))  # one compile for values and gradients
+    grads = vg(*args)[1]
     for i, (a, g) in enumerate(zip(args, grads)):
         dirs = sym if a.shape == (3, 3) else None
-        fd = central_diff(lambda v: float(f(*args[:i], v, *args[i + 1:])), a, dirs)
+        fd = central_diff(lambda v: float(vg(*args[:i], v, *args[i + 1:])[0]), a, dirs)
         ad = np.asarray(g).reshape(-1) if dirs is None else np.einsum("ij,kij->k", np.asarray(g), sym)
         # equilibria are exact to ~1e-15; over the sqrt(eps) step that is ~1e-7 of the scale
         np.testing.assert_allclose(ad, fd, rtol=1e-6, atol=1e-7 * np.max(np.abs(fd)))
