@@ -175,8 +175,8 @@ def test_gradients_match_central_differences():
     # one compilation: the differences use the value half of the same compiled value_and_grad
     vg = jax.jit(jax.value_and_grad(loss))
     f = lambda p: vg(p)[0]  # noqa: E731
-    g = vg(p0)[1]
     flat, unravel = ravel_pytree(p0)
+    g = vg(unravel(flat))[1]  # unravel's (strong) dtypes, as in the differences: no second compile
     gflat = ravel_pytree(g)[0]
     for i in range(flat.size):
         h = 1e-6 * max(1.0, abs(float(flat[i])))
