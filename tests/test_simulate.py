@@ -20,6 +20,10 @@ TAU0 = 0.08
 R = np.pi / 12
 TG = pj.center_out_targets()
 CHAIN = pj.Wrist(1.0)
+# One schedule for the single-movement tests, so that they share compilations (each new shape or
+# static argument of `simulate` compiles the integrator again).
+KW = dict(duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=10))
+ARIMOTO = pj.ArimotoPlanner(k=22.5, tau=0.08)
 
 
 def lam0(KJ=KJ_S2, q_rest=QREST_S2, tau0=TAU0):
@@ -86,8 +90,7 @@ def test_task_dynamics_identity_along_trajectory(long_runs):
 def test_matches_solve_ivp():
     q0 = QREST_S2 + np.array([0.1, 0.05, -0.05])
     target = TG["NE"]
-    tr = pj.simulate(lam0(), pj.ArimotoPlanner(k=22.5, tau=0.08), q0, target, duration=0.4,
-                     dt=1e-3, saveat=pj.SaveAt(every=10))
+    tr = pj.simulate(lam0(), ARIMOTO, q0, target, **KW)
     gain = arimoto(22.5, 0.08)
     ref = scipy.integrate.solve_ivp(
         lambda t, q: pmp_qdot(q, t, target, KJ_S2, QREST_S2, TAU0 * KJ_S2, gain),
@@ -97,8 +100,7 @@ def test_matches_solve_ivp():
 
 
 def test_bell_shaped_speed_profile():
-    tr = pj.simulate(lam0(KJ_F3, QREST_F3), pj.ArimotoPlanner(k=22.5, tau=0.08), QREST_F3, TG["NE"],
-                     duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=10))
+    tr = pj.simulate(lam0(KJ_F3, QREST_F3), ARIMOTO, QREST_F3, TG["NE"], **KW)
     v = np.asarray(tr.speed)
     assert v[0] < 1e-12
     peaks = [i for i in range(1, len(v) - 1) if v[i] > v[i - 1] and v[i] >= v[i + 1]]
@@ -108,8 +110,7 @@ def test_bell_shaped_speed_profile():
 
 def test_minimum_jerk_planner_gives_straight_minimum_jerk_path():
     T = 0.4
-    tr = pj.simulate(lam0(), pj.MinimumJerkPlanner(duration=T), QREST_S2, TG["SW"], duration=T,
-                     dt=5e-4, saveat=pj.SaveAt(every=20))
+    tr = pj.simulate(lam0(), pj.MinimumJerkPlanner(duration=T), QREST_S2, TG["SW"], **KW)
     s = np.asarray(tr.t) / T
     xi = s**3 * (10 - 15 * s + 6 * s**2)
     x0 = np.asarray(tr.x[0])
@@ -125,10 +126,9 @@ def test_batch_equals_single_runs(rng):
     targets = R * np.stack([np.cos(ang), np.sin(ang)], -1)
     KJ = np.stack([KJ_S2 * s for s in rng.uniform(0.8, 1.2, B)])
     model = pj.Lambda0PMP(CHAIN, KJ=KJ, q_rest=QREST_S2, W=TAU0 * KJ)
-    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
-    kw = dict(duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=100))
+    planner, kw = ARIMOTO, KW
     batch = pj.simulate(model, planner, q0, targets, **kw)
-    assert batch.q.shape == (B, 5, 3)
+    assert batch.q.shape == (B, 41, 3)
     for i in range(B):
         one = pj.simulate(lam0(KJ[i]), planner, q0[i], targets[i], **kw)
         np.testing.assert_allclose(batch.q[i], one.q, rtol=0, atol=1e-13)
@@ -137,8 +137,8 @@ def test_batch_equals_single_runs(rng):
 
 
 def test_saveat_given_times_and_final():
-    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
-    full = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=10))
+    planner = ARIMOTO
+    full = pj.simulate(lam0(), planner, QREST_S2, TG["W"], **KW)
     ts = (0.0, 0.1, 0.25, 0.4)
     at = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(ts=ts))
     idx = [int(round(t / 0.01)) for t in ts]
@@ -150,7 +150,7 @@ def test_saveat_given_times_and_final():
 def test_eq10_gain_against_numpy():
     q0 = QREST_S2
     planner = pj.ArimotoPlanner(k=None, tau=0.08, tau0=TAU0)
-    tr = pj.simulate(lam0(), planner, q0, TG["S"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(every=100))
+    tr = pj.simulate(lam0(), planner, q0, TG["S"], **KW)
     J = wrist_jac(q0)
     b_max = np.linalg.eigvalsh(np.linalg.inv(J @ np.linalg.inv(TAU0 * KJ_S2) @ J.T)).max()
     gain = arimoto(b_max / TAU0, 0.08)
@@ -163,19 +163,20 @@ def test_eq10_gain_against_numpy():
 def test_gradients_match_central_differences():
     """d/dθ of a trajectory loss, θ = (KJ, q_rest, τ0, τ, k, target)."""
     q0 = QREST_S2 + np.array([0.05, 0.0, 0.05])
-    kw = dict(duration=0.2, dt=2e-3, saveat=pj.SaveAt(every=20))
 
     def loss(p):
         KJ = p["KJ"] + p["KJ"].T  # symmetric parameterisation
         model = pj.Lambda0PMP(CHAIN, KJ=KJ, q_rest=p["q_rest"], W=p["tau0"] * KJ)
-        tr = pj.simulate(model, pj.ArimotoPlanner(k=p["k"], tau=p["tau"]), q0, p["target"], **kw)
+        tr = pj.simulate(model, pj.ArimotoPlanner(k=p["k"], tau=p["tau"]), q0, p["target"], **KW)
         return jnp.sum(tr.x**2) + jnp.sum(jnp.sin(tr.q[-1]))
 
     p0 = {"KJ": jnp.asarray(KJ_S2 / 2), "q_rest": jnp.asarray(QREST_S2), "tau0": jnp.asarray(0.08),
           "tau": jnp.asarray(0.06), "k": jnp.asarray(20.0), "target": jnp.asarray(TG["NW"])}
-    f = jax.jit(loss)
-    g = jax.jit(jax.grad(loss))(p0)
+    # one compilation: the differences use the value half of the same compiled value_and_grad
+    vg = jax.jit(jax.value_and_grad(loss))
+    f = lambda p: vg(p)[0]  # noqa: E731
     flat, unravel = ravel_pytree(p0)
+    g = vg(unravel(flat))[1]  # unravel's (strong) dtypes, as in the differences: no second compile
     gflat = ravel_pytree(g)[0]
     for i in range(flat.size):
         h = 1e-6 * max(1.0, abs(float(flat[i])))
@@ -186,8 +187,7 @@ def test_gradients_match_central_differences():
 
 def test_singular_start_is_flagged():
     q0 = np.array([0.0, np.pi / 2 - 1e-6, 0.0])
-    tr = pj.simulate(lam0(), pj.ConstantPlanner(k=1.0), q0, TG["C"], duration=0.05, dt=1e-3,
-                     saveat=pj.SaveAt(every=10))
+    tr = pj.simulate(lam0(), ARIMOTO, q0, TG["C"], **KW)
     assert int(tr.status) == pj.Status.SINGULAR and float(tr.manipulability[0]) < 1e-4
 
 
