@@ -472,9 +472,7 @@ def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: in
     if not isinstance(chain, Wrist):
         raise TypeError(f"`chain` must be a pmpjax.Wrist (Donders surfaces are of wrist orientations), got "
                         f"{type(chain).__name__}")
-    grid = check_positive_int("grid", grid)
-    if grid < 3:
-        raise ValueError(f"`grid` must be >= 3 (a quadratic surface), got {grid}")
+    grid = check_positive_int("grid", grid, minimum=3)  # (a quadratic surface)
     pointing = np.asarray(as_array("pointing", pointing, tail=(None, 2), finite=False), dtype=float)
     postures = np.asarray(as_array("postures", postures, tail=(None, 3), finite=False), dtype=float)
     if postures.ndim == 2:

@@ -231,9 +231,7 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
     if not isinstance(recording, PointingRecording):
         raise TypeError(f"`recording` must be a pmpjax.PointingRecording (pmpjax.read_pointing), got "
                         f"{type(recording).__name__}")
-    n_samples = check_positive_int("n_samples", n_samples)
-    if n_samples < 2:
-        raise ValueError(f"`n_samples` must be >= 2, got {n_samples}")
+    n_samples = check_positive_int("n_samples", n_samples, minimum=2)
     if not (np.isfinite(threshold) and 0.0 < threshold < 1.0):
         raise ValueError(f"`threshold` must lie in (0, 1), got {threshold}")
     if not iqr > 0:  # np.inf switches the outlier rule off

@@ -5,6 +5,25 @@ import jax
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
+
+def _shared_compilation_cache() -> None:
+    """One persistent compilation cache per test run, shared by the xdist workers (a function that
+    two test files compile, e.g. a test module and its notebook, is compiled once). Fresh every
+    run, so every run measures cold compilation as CI does."""
+    import os
+    import tempfile
+    import uuid
+
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID") or uuid.uuid4().hex
+    path = os.path.join(tempfile.gettempdir(), f"pmpjax-test-jax-cache-{run}")
+    os.makedirs(path, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+_shared_compilation_cache()
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 

@@ -64,10 +64,12 @@ def check_positive(name: str, x: Any) -> None:
         raise ValueError(f"`{name}` must be positive, got {a.min() if a.size else a}")
 
 
-def check_positive_int(name: str, v: Any) -> int:
-    """Require ``v`` to be an integer >= 1 (counts, step limits); returns ``int(v)``."""
+def check_positive_int(name: str, v: Any, minimum: int = 1) -> int:
+    """Require ``v`` to be an integer >= ``minimum`` (counts, step limits); returns ``int(v)``."""
     if int(v) != v or v < 1:
         raise ValueError(f"`{name}` must be a positive integer, got {v}")
+    if v < minimum:
+        raise ValueError(f"`{name}` must be >= {minimum}, got {v}")
     return int(v)
 
 
