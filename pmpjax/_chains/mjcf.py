@@ -117,8 +117,7 @@ def gravity_gradient(mx, q):
 def gravity_from_kinematics(mx, d):
     """``∇V`` (nv,) [Nm] (see :func:`gravity_gradient`) from the kinematics fields (``xipos``,
     ``xanchor``, ``xaxis``) of a :class:`Kinematics` or an ``mjx.Data``, e.g. the one ``mjx.step``
-    returns: those fields
-    are for the posture at the start of that step."""
+    returns: those fields are for the posture at the start of that step."""
     with jax.numpy_rank_promotion("allow"):
         mass = _subtree_mask(mx) * mx.body_mass[None, :]
         M = jnp.sum(mass, axis=1)[:, None]
