@@ -2,7 +2,7 @@
 
 It lets the λ0-PMP (``pmpjax.simulate``) plan joint trajectories for any MJCF model with hinge
 and slide joints, e.g. set-point trajectories for the springy arm (``pmpjax.load_arm``). The
-Jacobian is in closed form from one ``mjx.kinematics`` pass (as ``mj_jacSite``); the MJX model is
+Jacobian is in closed form from one kinematics pass (as ``mj_jacSite``); the MJX model is
 a pytree leaf container, so the chain can be passed through ``jax.jit`` like the other chains.
 MuJoCo and MJX are imported on first use (``pmpjax._base.mujoco``), not by ``import pmpjax``.
 """
@@ -21,6 +21,7 @@ from .._base.pytree import pytree_dataclass, static_field
 from .._base.validate import is_concrete
 from .kinematics import Chain
 
+_SLIDE = 2  # mujoco.mjtJoint.mjJNT_SLIDE
 _HINGE = 3  # mujoco.mjtJoint.mjJNT_HINGE
 
 
@@ -33,13 +34,73 @@ def _mj_model(xml_or_model):
     return load_mj_model(xml_or_model)
 
 
+@pytree_dataclass
+class Kinematics:
+    """Frames at one posture (the ``mjx.Data`` fields of the same names): ``xpos`` (nbody, 3),
+    ``xmat`` (nbody, 3, 3), ``xipos`` (nbody, 3), ``xanchor`` (njnt, 3), ``xaxis`` (njnt, 3),
+    ``site_xpos`` (nsite, 3)."""
+
+    xpos: Any
+    xmat: Any
+    xipos: Any
+    xanchor: Any
+    xaxis: Any
+    site_xpos: Any
+
+
+def _quat_mat(u):
+    w, x, y, z = u[0], u[1], u[2], u[3]
+    return jnp.stack([
+        jnp.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)]),
+        jnp.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)]),
+        jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z]),
+    ]) / (u @ u)
+
+
+def _axis_angle_mat(a, angle):
+    """Rotation matrix of ``angle`` about the unit axis ``a`` (Rodrigues)."""
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return c * jnp.eye(3, dtype=a.dtype) + s * jnp.cross(jnp.eye(3, dtype=a.dtype), a) + (1 - c) * jnp.outer(a, a)
+
+
 def kinematics(mx, q):
-    """MJX forward kinematics at joint positions ``q`` (nq,): an ``mjx.Data`` with ``xpos``,
-    ``xipos``, ``site_xpos`` etc. filled in."""
-    mjx = import_mjx()
-    with jax.numpy_rank_promotion("allow"):
-        d = mjx.make_data(mx).replace(qpos=q)
-        return mjx.kinematics(mx, d)
+    """Forward kinematics at joint positions ``q`` (nq,) for hinge/slide trees, as
+    ``mj_kinematics``: a :class:`Kinematics`. Written out body by body (a few dozen small ops),
+    because ``mjx.kinematics`` on a full ``mjx.make_data`` makes graphs that take tens of seconds
+    to compile. Mocap bodies sit at their model pose."""
+    parent, jadr, jnum = (np.asarray(a) for a in (mx.body_parentid, mx.body_jntadr, mx.body_jntnum))
+    jtype, qadr = np.asarray(mx.jnt_type), np.asarray(mx.jnt_qposadr)
+    if not np.all((jtype == _HINGE) | (jtype == _SLIDE)):
+        raise ValueError("kinematics supports hinge and slide joints only")
+    q = jnp.asarray(q)
+    xpos, xmat = [jnp.zeros(3, q.dtype)], [jnp.eye(3, dtype=q.dtype)]
+    anchors, axes = [None] * jtype.size, [None] * jtype.size
+    for b in range(1, parent.size):
+        p = int(parent[b])
+        pos = xpos[p] + xmat[p] @ mx.body_pos[b]
+        R = xmat[p] @ _quat_mat(mx.body_quat[b])
+        for j in range(int(jadr[b]), int(jadr[b]) + int(jnum[b])):
+            anchors[j] = R @ mx.jnt_pos[j] + pos
+            axes[j] = R @ mx.jnt_axis[j]
+            angle = q[qadr[j]] - mx.qpos0[qadr[j]]
+            if jtype[j] == _SLIDE:
+                pos = pos + axes[j] * angle
+            else:
+                R = R @ _axis_angle_mat(mx.jnt_axis[j], angle)
+                pos = anchors[j] - R @ mx.jnt_pos[j]
+        xpos.append(pos)
+        xmat.append(R)
+    xpos, xmat = jnp.stack(xpos), jnp.stack(xmat)
+    sb = np.asarray(mx.site_bodyid)
+    z = jnp.zeros((0, 3), q.dtype)
+    return Kinematics(
+        xpos=xpos,
+        xmat=xmat,
+        xipos=xpos + jnp.einsum("bij,bj->bi", xmat, mx.body_ipos),
+        xanchor=jnp.stack(anchors) if anchors else z,
+        xaxis=jnp.stack(axes) if axes else z,
+        site_xpos=xpos[sb] + jnp.einsum("sij,sj->si", xmat[sb], mx.site_pos) if sb.size else z,
+    )
 
 
 def gravity_gradient(mx, q):
@@ -55,8 +116,8 @@ def gravity_gradient(mx, q):
 
 def gravity_from_kinematics(mx, d):
     """``∇V`` (nv,) [Nm] (see :func:`gravity_gradient`) from the kinematics fields (``xipos``,
-    ``xanchor``, ``xaxis``) of an ``mjx.Data``, e.g. the one ``mjx.step`` returns: those fields
-    are for the posture at the start of that step."""
+    ``xanchor``, ``xaxis``) of a :class:`Kinematics` or an ``mjx.Data``, e.g. the one ``mjx.step``
+    returns: those fields are for the posture at the start of that step."""
     with jax.numpy_rank_promotion("allow"):
         mass = _subtree_mask(mx) * mx.body_mass[None, :]
         M = jnp.sum(mass, axis=1)[:, None]
@@ -95,7 +156,7 @@ def _moves_joint(mx) -> np.ndarray:
 
 def gravity_terms(mx, q):
     """``(∇V (nv,), ∇²V (nv, nv), d)`` at ``q`` from one kinematics pass (hinge joints only);
-    ``d`` is the kinematics ``mjx.Data`` (for site positions).
+    ``d`` the :class:`Kinematics` (for site positions).
 
     With ``m_j = M_j (C_j − p_j)`` (subtree mass moment about joint j) and ``G_ij =
     −gᵀ (a_i × (a_j × m_j))``: ``∂²V/∂q_j∂q_i = G_ij`` when joint i moves joint j (rotating the
