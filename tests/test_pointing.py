@@ -531,10 +531,14 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
         rp, rm = np.asarray(residual(x + e, one)), np.asarray(residual(x - e, one))
         fd = (rp - rm) / (2 * h)
         assert np.linalg.norm(Jac[:, i] - fd) <= 1e-5 * np.linalg.norm(fd) + 1e-8, name
-        # The path loss ½|r_path|²: its gradient J_pathᵀ r_path vs the difference quotient.
+        # The path loss ½|r_path|²: its gradient J_pathᵀ r_path vs the difference quotient. At the
+        # optimum the time constants' path gradients nearly cancel (the torsion does not depend on
+        # them), so the error allowed is the Jacobian's (1e-5 of |J_path e_i|·|r_path|), not relative to g.
         loss = lambda v: 0.5 * np.sum(v[Np:] ** 2)  # noqa: E731
         g = Jac[Np:, i] @ r[Np:]
-        assert g == pytest.approx((loss(rp) - loss(rm)) / (2 * h), rel=1e-4, abs=1e-7), name
+        fd_loss = (loss(rp) - loss(rm)) / (2 * h)
+        scale = np.linalg.norm(fd[Np:]) * np.linalg.norm(r[Np:])
+        assert abs(g - fd_loss) <= 1e-5 * scale + 1e-9, (name, g, fd_loss, scale)
         if i >= 5:  # q_rest and the time constants move the paths
             assert np.linalg.norm(fd[Np:]) > 1e-3, name
 
