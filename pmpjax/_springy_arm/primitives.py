@@ -108,28 +108,6 @@ class ArmEquilibrium:
         return self.status == Status.SUCCESSFUL
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _solve_equilibrium(n_iter, mx, q_set, K):
-    def newton(_, q):
-        g, H, _ = gravity_terms(mx, q)
-        dq = -jnp.linalg.solve(jnp.diag(K) + H, K * (q - q_set) + g)
-        # Cap the step (0.5 rad, ∞-norm) so a far start cannot jump across the workspace.
-        return q + dq * jnp.minimum(1.0, 0.5 / jnp.maximum(jnp.max(jnp.abs(dq)), 1e-300))
-
-    return jax.lax.fori_loop(0, n_iter, newton, q_set)
-
-
-@_solve_equilibrium.defjvp
-def _solve_equilibrium_jvp(n_iter, primals, tangents):
-    # Implicit function theorem on K (θ − θ_set) + ∇V(θ) = 0:
-    # (K + ∇²V) dθ = K dθ_set − dK ⊙ (θ − θ_set).  (The model's tangents are ignored.)
-    mx, qs, K = primals
-    _, dqs, dK = tangents
-    q = _solve_equilibrium(n_iter, mx, qs, K)
-    H = gravity_terms(mx, q)[1]
-    return q, jnp.linalg.solve(jnp.diag(K) + H, K * dqs - dK * (q - qs))
-
-
 def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
     # The shared Newton solver (pmpjax._base.newton): residual K (θ − θ_set) + ∇V(θ), Newton
     # matrix K + ∇²V from one MJX kinematics pass, 0.5 rad cap, n_iter steps; implicit gradients
