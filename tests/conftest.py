@@ -31,3 +31,25 @@ import pytest  # noqa: E402
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+# Springy-arm fixtures (test_primitives.py, test_springy_*.py): one arm per test module.
+@pytest.fixture(scope="module")
+def arm():
+    import pmpjax as pj
+
+    return pj.load_arm()
+
+
+@pytest.fixture(scope="module")
+def free_arm():
+    import pmpjax as pj
+
+    return pj.load_arm(contacts=False)
+
+
+@pytest.fixture(scope="module")
+def P():
+    import pmpjax as pj
+
+    return np.asarray(pj.default_primitives())

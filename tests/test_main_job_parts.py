@@ -2,12 +2,10 @@
 test_notebook_pointing.py; reaching: test_reaching.py; donders_nio: test_donders.py): each runs, writes its artefacts, and its
 numbers agree with something independent of the part's own code."""
 
-import csv
 
 import numpy as np
 import pytest
 
-import pmpjax as pj
 from pmpjax import _cli
 
 

@@ -28,21 +28,6 @@ ROOT = Path(__file__).resolve().parents[1]
 N_EQ = 64  # one equilibrium batch shape for the whole module
 
 
-@pytest.fixture(scope="module")
-def arm():
-    return pj.load_arm()
-
-
-@pytest.fixture(scope="module")
-def free_arm():
-    return pj.load_arm(contacts=False)
-
-
-@pytest.fixture(scope="module")
-def P():
-    return np.asarray(pj.default_primitives())
-
-
 # ----------------------------------------------------------------------------------------------
 # Import: no MuJoCo/MJX until used, and no warp noise (issue 9 item 7)
 

@@ -21,21 +21,6 @@ from pmpjax._springy_arm.arm import PROBE_PARK
 from pmpjax._springy_arm.reflexes import GRASP, LEAD, WITHDRAW
 
 
-@pytest.fixture(scope="module")
-def arm():
-    return pj.load_arm()
-
-
-@pytest.fixture(scope="module")
-def free_arm():
-    return pj.load_arm(contacts=False)
-
-
-@pytest.fixture(scope="module")
-def P():
-    return np.asarray(pj.default_primitives())
-
-
 # ----------------------------------------------------------------------------------------------
 # Reflex network, closed loop on C MuJoCo (no compile) and on MJX (one compile, checked against C)
 

@@ -19,16 +19,6 @@ from _springy import c_replay, c_settle, central_diff
 import pmpjax as pj
 
 
-@pytest.fixture(scope="module")
-def free_arm():
-    return pj.load_arm(contacts=False)
-
-
-@pytest.fixture(scope="module")
-def P():
-    return np.asarray(pj.default_primitives())
-
-
 # ----------------------------------------------------------------------------------------------
 # Open-loop rollouts: MJX, C MuJoCo batch rollout, λ0-PMP plans executed on the springy arm
 
