@@ -82,6 +82,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
+from pmpjax._base.batching import pad_rows
 from pmpjax._base.status import Status, status_message
 from pmpjax._data.hugmp import hugmp_directory
 
@@ -886,11 +887,6 @@ def _stability_steps(rates, minimum, *, margin=1.25):
     return min(steps, max(int(minimum), MAX_STEPS_PER_SAMPLE))
 
 
-def _pad_rows(a, B):
-    a = np.asarray(a)
-    return np.concatenate([a, np.repeat(a[:1], B - a.shape[0], 0)]) if B > a.shape[0] else a
-
-
 def _errors(q_pred, q_obs, status):
     d = np.rad2deg(q_pred - q_obs)
     final = np.sqrt(np.mean(d[:, -1] ** 2, axis=-1))
@@ -967,8 +963,8 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     duration, recording = cat(lambda a, m: m.duration), cat(lambda a, m: m.recording)
     N = len(task)
     Bp = max(64, -(-N // 64) * 64)  # padded rows: calls of similar size share one compile
-    q0, target, t_ratio = _pad_rows(q_obs[:, 0], Bp), _pad_rows(x_obs[:, -1], Bp), _pad_rows(duration / recording, Bp)
-    own = _pad_rows(owner, Bp)
+    q0, target, t_ratio = pad_rows(q_obs[:, 0], Bp), pad_rows(x_obs[:, -1], Bp), pad_rows(duration / recording, Bp)
+    own = pad_rows(owner, Bp)
     chain = _chain()
 
     # the fitted model, one parameter set per row, and the unfitted λ0-PMP (KJ = I, q_rest = mean
