@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax._base.validate import csv_floats
+from pmpjax.internal import csv_floats
 
 
 def _x64():
@@ -252,14 +252,8 @@ def _analyze_pointing(args) -> int:
              "tau0_s": f"{tc.tau0[i]:.6g}", "tau_s": f"{tc.tau[i]:.6g}", "status": pj.status_message(int(tc.status[i])),
              "captured_T5": int(heuristic.n_captured[i]), "captured_fitted": int(pred.n_captured[i])}
             for i, s in enumerate(an.subjects)])
-    with np.errstate(all="ignore"):
-        mean_net, mean_sum = np.nanmean(an.a_net, axis=2), np.nanmean(an.a_sum, axis=2)
-    _write_csv(out / "pointing_statistics.csv", [
-        {"subject": s, "movement": lab, "n": int(an.n_valid[i, j]), "T_s": f"{an.T[i, j]:.6g}",
-         "A_sum": f"{mean_sum[i, j]:.6g}", "p_sum": f"{an.p_sum[i, j]:.4g}", "A_net": f"{mean_net[i, j]:.6g}",
-         "p_net": f"{an.p_net[i, j]:.4g}",
-         **({"A_net_model": f"{pred.a_net[i, j]:.6g}", "p_model": f"{pred.p_model[i, j]:.4g}"} if pred else {})}
-        for i, s in enumerate(an.subjects) for j, lab in enumerate(an.labels)])
+    _write_csv(out / "pointing_statistics.csv",
+               an.statistics_rows(None if pred is None else {"T5": heuristic, "fitted": pred}))
     (out / "pointing_statistics.txt").write_text(text + "\n")
     (out / "excluded.txt").write_text("".join(f"{e}\n" for e in an.excluded))
     if not args.no_figures:

@@ -45,13 +45,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._base.batching import bucket, pad_rows
-from pmpjax._base.pytree import replace
-from pmpjax._base.status import Status
-from pmpjax._base.validate import as_array, check_finite_masked, check_positive_int, check_spd
-from pmpjax._chains.kinematics import Chain, Wrist
-from pmpjax._pmp.equilibria import equilibrium_one, equilibrium_posture
-from pmpjax._wrist.orientation import rotvec_from_joint_angles, torsion_between, wrist_rotation
+from pmpjax import Chain, Status, Wrist, equilibrium_posture, rotvec_from_joint_angles, torsion_between, wrist_rotation
+from pmpjax.internal import (
+    as_array,
+    bucket,
+    check_finite_masked,
+    check_positive_int,
+    check_spd,
+    equilibrium_one,
+    pad_rows,
+    replace,
+)
 
 from ._optimise import covariance, least_squares
 
@@ -466,8 +470,7 @@ def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: in
     samples route (:func:`fit_donders`), where noise and the data's spread pin the parameters
     down, is the better-posed of the two (tests/test_pointing.py compares them).
     """
-    from pmpjax._wrist.donders import evaluate_surface, fit_donders_surface
-    from pmpjax._wrist.orientation import joint_angles_from_matrix, matrix_from_rotvec
+    from pmpjax import evaluate_surface, fit_donders_surface, joint_angles_from_matrix, matrix_from_rotvec
 
     if not isinstance(chain, Wrist):
         raise TypeError(f"`chain` must be a pmpjax.Wrist (Donders surfaces are of wrist orientations), got "

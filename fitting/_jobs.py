@@ -292,15 +292,8 @@ def pointing(ctx) -> dict:
     fitted = predict_pointing(an, KJ, q_rest, tau0=tc.tau0, tau=tc.tau)
     (ctx.out / "pointing_statistics.txt").write_text(an.table() + "\n\n" + heuristic.table() + "\n")
 
-    with np.errstate(all="ignore"):
-        mean_net, sd_net = np.nanmean(an.a_net, axis=2), np.nanstd(an.a_net, axis=2, ddof=1)
-        mean_sum = np.nanmean(an.a_sum, axis=2)
-    rows = [{"subject": name, "movement": lab, "n": int(an.n_valid[s, j]), "T_s": float(an.T[s, j]),
-             "A_sum": float(mean_sum[s, j]), "p_sum": float(an.p_sum[s, j]),
-             "A_net": float(mean_net[s, j]), "A_net_sd": float(sd_net[s, j]), "p_net": float(an.p_net[s, j]),
-             "A_net_model_T5": float(heuristic.a_net[s, j]), "p_model_T5": float(heuristic.p_model[s, j]),
-             "A_net_model_fitted": float(fitted.a_net[s, j]), "p_model_fitted": float(fitted.p_model[s, j])}
-            for s, name in enumerate(an.subjects) for j, lab in enumerate(an.labels)]
+    rows = an.statistics_rows({"T5": heuristic, "fitted": fitted})
+    mean_net = np.array([r["A_net"] for r in rows]).reshape(an.T.shape)  # (S, L)
     ctx.table(rows, "pointing_statistics.csv",
               "Per subject × movement: mean duration, curvature A_sum and A_net (normalised by (π/12)²) with "
               "t-test p-values against 0, and the Donders-fitted model's A_net with the p-value of the measured "

@@ -26,9 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.status import Status
-from pmpjax._base.validate import as_array, check_positive, check_positive_int, is_concrete
+from pmpjax import Status
+from pmpjax.internal import as_array, check_positive, check_positive_int, is_concrete, pytree_dataclass
 
 
 @pytree_dataclass

@@ -51,17 +51,24 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.stats
 
-from pmpjax._analysis.movement import gcv_lambda, segment_by_speed, smooth_path
-from pmpjax._base.status import Status
-from pmpjax._base.validate import as_array, check_positive_int, check_spd
-from pmpjax._chains.kinematics import Wrist
-from pmpjax._pmp.redundancy import task_damping
-from pmpjax._wrist.center_out import DIRECTIONS, center_out_targets
-from pmpjax._wrist.curvature import curvature_measures
-from pmpjax._wrist.orientation import joint_angles_from_quat
-from pmpjax._wrist.pointing import (
+from pmpjax import (
+    DIRECTIONS,
     MOVEMENT_LABELS,
     PointingRecording,
+    Status,
+    Wrist,
+    center_out_targets,
+    curvature_measures,
+    gcv_lambda,
+    joint_angles_from_quat,
+    segment_by_speed,
+    smooth_path,
+    task_damping,
+)
+from pmpjax.internal import (
+    as_array,
+    check_positive_int,
+    check_spd,
     drop_trials,
     model_grid,
     normalised_movements,
@@ -139,6 +146,30 @@ class PointingAnalysis:
             return self.subjects.index(str(subject))
         raise ValueError(f"`subject` {subject!r} is not one of {list(self.subjects)} (or an index below "
                          f"{len(self.subjects)})")
+
+    def statistics_rows(self, predictions: dict | None = None) -> list[dict]:
+        """The statistics as rows (one per subject × movement, floats; NaN where untested):
+        ``n``, mean duration ``T_s`` [s], mean ``A_sum``, ``A_net`` (normalised by (π/12)²) with
+        their t-test p-values and the SD of ``A_net``; for every ``name: PointingPrediction`` in
+        ``predictions`` the model's ``A_net_model_<name>`` and the p-value ``p_model_<name>`` of the
+        measured areas against it. The table behind the main job's and ``pmpjax analyze-pointing``'s
+        ``pointing_statistics.csv``."""
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean_net, sd_net = np.nanmean(self.a_net, axis=2), np.nanstd(self.a_net, axis=2, ddof=1)
+            mean_sum = np.nanmean(self.a_sum, axis=2)
+        rows = []
+        for s, name in enumerate(self.subjects):
+            for j, lab in enumerate(self.labels):
+                row = {"subject": name, "movement": lab, "n": int(self.n_valid[s, j]), "T_s": float(self.T[s, j]),
+                       "A_sum": float(mean_sum[s, j]), "p_sum": float(self.p_sum[s, j]),
+                       "A_net": float(mean_net[s, j]), "A_net_sd": float(sd_net[s, j]),
+                       "p_net": float(self.p_net[s, j])}
+                for tag, pred in (predictions or {}).items():
+                    row[f"A_net_model_{tag}"] = float(pred.a_net[s, j])
+                    row[f"p_model_{tag}"] = float(pred.p_model[s, j])
+                rows.append(row)
+        return rows
 
     def table(self, subject=None, *, alpha: float = _ALPHA) -> str:
         """The statistics as text: per movement n, mean A_sum and A_net with their p-values, and

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pmpjax._wrist.center_out import DIRECTIONS
+from pmpjax import DIRECTIONS
 
 from ._pointing import PointingAnalysis, PointingPrediction
 

@@ -82,9 +82,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._base.batching import pad_rows
-from pmpjax._base.status import Status, status_message
-from pmpjax._data.hugmp import hugmp_directory
+from pmpjax import Status, status_message
+from pmpjax.internal import hugmp_directory, pad_rows
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints

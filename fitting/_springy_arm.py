@@ -15,16 +15,18 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.status import Status
-from pmpjax._base.validate import as_array, check_positive, check_positive_int
-from pmpjax._springy_arm.arm import CogArm, check_arm
-from pmpjax._springy_arm.primitives import (
+from pmpjax import CogArm, Status
+from pmpjax.internal import (
     arm_equilibrium_one,
-    batch_bucket,
+    as_array,
+    bucket,
+    check_arm,
+    check_positive,
+    check_positive_int,
     check_set_point,
     check_stiffness,
     pad_rows,
+    pytree_dataclass,
 )
 
 from ._optimise import least_squares
@@ -85,8 +87,9 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     batch = target.shape[:-1]
     flat = target.reshape(-1, 3)
     B = flat.shape[0]
+    padded = pad_rows(flat, bucket(B, minimum=8))
     alpha, hand, steps, conv = (
-        a[:B] for a in _fit_blend(arm.mjx_model, arm.layout.hand_site, P, K, pad_rows(flat, batch_bucket(B)), max_steps)
+        a[:B] for a in _fit_blend(arm.mjx_model, arm.layout.hand_site, P, K, padded, max_steps)
     )
     err = jnp.linalg.norm(hand - flat, axis=-1)
     finite = jnp.isfinite(err) & jnp.all(jnp.isfinite(alpha), axis=-1)
@@ -147,8 +150,9 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
     batch = q_obs.shape[:-2]
     flat = q_obs.reshape((-1,) + q_set.shape)
     B = flat.shape[0]
+    padded = pad_rows(flat, bucket(B, minimum=8))
     kappa, rms, steps, conv = (
-        a[:B] for a in _fit_stiffness(arm.mjx_model, q_set, pad_rows(flat, batch_bucket(B)), jnp.log(K0), max_steps)
+        a[:B] for a in _fit_stiffness(arm.mjx_model, q_set, padded, jnp.log(K0), max_steps)
     )
     finite = jnp.isfinite(rms) & jnp.all(jnp.isfinite(kappa), axis=-1)
     return StiffnessFit(

@@ -72,8 +72,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from pmpjax._base.status import Status
-from pmpjax._base.validate import check_positive_int
+from pmpjax import Status
+from pmpjax.internal import check_positive_int
 
 FORMAT = "pmpjax sweep v1"
 _SHARD = re.compile(r"^(\d{6,})-([0-9a-f]{32})\.npz$")

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._base.status import Status
+from pmpjax import Status
 
 #: Eigenvalues of KJ (PS, FE, RUD) before the trace normalisation: Figure 3's (0.5, 1.5, 2) has
 #: anisotropy K_RUD / K_FE = 4/3.
@@ -87,7 +87,7 @@ def donders_power_row(p, *, n_max: int = N_MAX, n_starts: int = 2, max_steps: in
     rotation with isotropic Gaussian rotation vector, and the pointing of the noisy orientation.
     Returns ``KJ_error`` (max |KJ_fit − KJ| [Nm/rad]), ``KJ_fit`` (3, 3) and ``status``.
     """
-    from pmpjax._pmp.equilibria import equilibrium_one
+    from pmpjax.internal import equilibrium_one
 
     from ._donders import _fit_batch, _starts, stiffness_from_params
 

@@ -36,10 +36,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax._base.status import Status
-from pmpjax._base.validate import check_positive_int
-from pmpjax._chains.kinematics import Wrist
-from pmpjax._wrist.pointing import MODEL_DT, MODEL_SPAN, normalised_movements
+from pmpjax import Status, Wrist
+from pmpjax.internal import MODEL_DT, MODEL_SPAN, check_positive_int, normalised_movements
 
 from ._optimise import covariance, least_squares
 from ._pointing import (
@@ -251,9 +249,7 @@ def _fit_joint(theta0, data, *, opts, max_steps, n_torsion):
 
 
 def _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau):
-    from pmpjax._wrist.donders import fit_donders_surface
-    from pmpjax._wrist.donders_recordings import DondersRecording
-    from pmpjax._wrist.orientation import rotvec_from_joint_angles
+    from pmpjax import DondersRecording, fit_donders_surface, rotvec_from_joint_angles
 
     from ._donders import params_from_stiffness
 

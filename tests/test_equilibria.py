@@ -110,7 +110,8 @@ def _grads(mode, wrist, cache={}):
     """d_loss/d(KJ, q_rest, x) at the two targets, once per mode and module."""
     if mode not in cache:
         diff = jax.grad if mode == "rev" else jax.jacfwd
-        cache[mode] = diff(_loss, argnums=(0, 1, 2))(jnp.asarray(KJ1), jnp.asarray(QR1), jnp.asarray(TARGETS[1:3]), wrist)
+        args = (jnp.asarray(KJ1), jnp.asarray(QR1), jnp.asarray(TARGETS[1:3]))
+        cache[mode] = diff(_loss, argnums=(0, 1, 2))(*args, wrist)
     return cache[mode]
 
 

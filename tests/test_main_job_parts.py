@@ -1,6 +1,6 @@
-"""The main job's remaining parts at their ``--quick`` sizes (figure3/figure4: test_cli.py; pointing:
-test_notebook_pointing.py; reaching: test_reaching.py; donders_nio: test_donders.py): each runs, writes its artefacts, and its
-numbers agree with something independent of the part's own code."""
+"""The main job's remaining parts at their ``--quick`` sizes (figure3/figure4: test_cli.py;
+pointing: test_notebook_pointing.py; reaching: test_reaching.py; donders_nio: test_donders.py):
+each runs, writes its artefacts, and its numbers agree with something independent of the part's own code."""
 
 
 import numpy as np

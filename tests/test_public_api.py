@@ -61,3 +61,31 @@ def test_every_public_entry_point_has_a_bad_input_test():
 def test_marks_name_real_public_names():
     unknown = sorted(marked_names() - public_names())
     assert not unknown, f"bad_input marks name things that are not public: {unknown}"
+
+
+def _imports(package: str):
+    """(file, line, module) of every ``from X import`` / ``import X`` in a package's sources."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / package
+    for f in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                yield f.name, node.lineno, node.module
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    yield f.name, node.lineno, a.name
+
+
+def test_fitting_uses_only_the_public_and_internal_surfaces_of_pmpjax():
+    """The layout's dependency rules: ``fitting`` reaches pmpjax through ``pmpjax`` and
+    ``pmpjax.internal`` only (no private module), and ``pmpjax`` never imports ``fitting``."""
+    private = [f"{f}:{n} {m}" for f, n, m in _imports("fitting") if m.startswith("pmpjax._")]
+    assert not private, f"fitting imports private pmpjax modules: {private}"
+    upward = [f"{f}:{n} {m}" for f, n, m in _imports("pmpjax") if m.split(".")[0] == "fitting"]
+    assert not upward, f"pmpjax imports fitting: {upward}"
+    import pmpjax.internal as internal
+
+    names = [n for n in dir(internal) if not n.startswith("_")]
+    assert names and all(getattr(internal, n) is not None for n in names)

@@ -20,7 +20,6 @@ import pmpjax as pj
 from pmpjax._springy_arm.arm import PROBE_PARK
 from pmpjax._springy_arm.reflexes import GRASP, LEAD, WITHDRAW
 
-
 # ----------------------------------------------------------------------------------------------
 # Reflex network, closed loop on C MuJoCo (no compile) and on MJX (one compile, checked against C)
 

@@ -18,7 +18,6 @@ from _springy import c_replay, c_settle, central_diff
 
 import pmpjax as pj
 
-
 # ----------------------------------------------------------------------------------------------
 # Open-loop rollouts: MJX, C MuJoCo batch rollout, λ0-PMP plans executed on the springy arm
 

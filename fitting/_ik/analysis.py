@@ -10,8 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.validate import as_array, check_positive, check_positive_int
+from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass
 
 from .examples import _check_key
 from .weights import estimate_ik_weights

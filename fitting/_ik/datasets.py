@@ -20,10 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._base.linalg import mv
-from pmpjax._base.validate import check_positive_int
-from pmpjax._pmp.integrate import integrate
-from pmpjax._pmp.redundancy import pinv_apply_diag_soa
+from pmpjax.internal import check_positive_int, integrate, minimum_jerk, mv, pinv_apply_diag_soa
 
 # Contribution coefficients reported in the paper's Discussion (Eq 26) for Experiment 1:
 # Natural β = (.04, .27, .65, .04), Viscous β = (.09, .68, .14, .09) -> weights ∝ 1/β (rounded;
@@ -48,10 +45,6 @@ def _check_nonneg(**values):
             raise ValueError(f"`{name}` must be a finite number >= 0, got {v!r}")
 
 
-def _min_jerk(s):
-    return s**3 * (10 - 15 * s + 6 * s**2), (30 * s**2 - 60 * s**3 + 30 * s**4)
-
-
 def _ik_velocity(J, w, b, g):
     """``J#_W b + N_W g`` (n, ...) with ``W = diag(w)``: one solve through the redundancy kernel."""
     return g + pinv_apply_diag_soa(J, 1.0 / w, b - mv(J, g))[0]
@@ -65,7 +58,7 @@ def _reach(chain, q0, x_goal, w, k_pos, k_null, dt):
 
     def field(t, q, args):
         x, J = chain.fk_jac_soa(q)
-        s, ds = _min_jerk(jnp.clip(t / T, 0.0, 1.0))
+        s, ds = minimum_jerk(t / T)
         xd = x0 + (x_goal - x0) * s
         b = (x_goal - x0) * ds / T + k_pos * (xd - x)
         return _ik_velocity(J, w, b, -k_null * (q - q0))

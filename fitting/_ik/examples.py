@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax._base.validate import check_positive_int
+from pmpjax.internal import check_positive_int
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 

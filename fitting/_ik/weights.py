@@ -24,10 +24,18 @@ from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from pmpjax import Status
-from pmpjax._base.linalg import det, mv, to_soa
-from pmpjax._base.pytree import pytree_dataclass
-from pmpjax._base.validate import as_array, check_positive, check_positive_int, is_concrete
-from pmpjax._pmp.redundancy import pinv_apply_diag_soa, pinv_diag_lists
+from pmpjax.internal import (
+    as_array,
+    check_positive,
+    check_positive_int,
+    det,
+    is_concrete,
+    mv,
+    pinv_apply_diag_soa,
+    pinv_diag_lists,
+    pytree_dataclass,
+    to_soa,
+)
 
 from .._optimise import least_squares
 

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import spd_solve
+from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass, replace, static_field
 from .._base.validate import as_array, check_positive
 
@@ -139,8 +140,8 @@ class MinimumJerkPlanner(Planner):
 
     def gain(self, t):
         s = jnp.clip(t / self.duration, 0.0, 1.0)
-        xi = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
-        dxi = 30.0 * s**2 * (1.0 - s) ** 2 / self.duration
+        xi, dxi_ds = minimum_jerk(s)
+        dxi = dxi_ds / self.duration
         one_minus = jnp.maximum(1.0 - xi, 1e-12)
         return jnp.where(s < 1.0, jnp.minimum(dxi / one_minus, self.gain_cap), self.gain_cap)
 

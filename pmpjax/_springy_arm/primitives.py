@@ -18,6 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows
+from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
 from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
@@ -133,18 +135,6 @@ def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
     return q, hand, res, (res <= tol * (1.0 + jnp.max(Ks))) & stable
 
 
-def batch_bucket(B: int) -> int:
-    """Padded size of a flat batch of ``B`` items: a power of two >= 8, so calls of similar size
-    share one compile (the rule of ``pmpjax._pmp.equilibria``). Internal surface for ``fitting``."""
-    return max(8, 1 << (max(B, 1) - 1).bit_length())
-
-
-def pad_rows(a, size: int):
-    """``a`` (B, ...) padded to (size, ...) by repeating its first row (valid data, dropped later)."""
-    B = a.shape[0]
-    return jnp.concatenate([a, jnp.broadcast_to(a[:1], (size - B,) + a.shape[1:])]) if size > B else a
-
-
 def arm_equilibrium_one(mx, site_id: int | None, q_set, K, *, n_iter: int = 12):
     """Internal surface (used by ``fitting``): equilibrium ``q`` (n,) of one arm for set-point
     ``q_set`` (n,) and stiffness ``K`` (n,), and the hand site position (3,) (``None`` when
@@ -171,14 +161,10 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     K = check_stiffness("K", arm.K if K is None else K, n)
     n_iter = check_positive_int("n_iter", n_iter)
     check_positive("tol", tol)
-    try:
-        batch = tuple(np.broadcast_shapes(q_set.shape[:-1], K.shape[:-1]))
-    except ValueError as e:
-        raise ValueError(f"leading (batch) axes of `q_set` {q_set.shape} and `K` {K.shape} do not broadcast") from e
+    batch = broadcast_batch(q_set=(q_set, 1), K=(K, 1))
     B = math.prod(batch)
-    qs = jnp.broadcast_to(q_set, batch + (n,)).reshape(B, n)
-    Ks = jnp.broadcast_to(K, batch + (n,)).reshape(B, n)
-    Bp = batch_bucket(B)
+    qs, Ks = flatten_batch(q_set, batch, 1), flatten_batch(K, batch, 1)
+    Bp = bucket(B, minimum=8)
     q, hand, res, status = (
         a[:B]
         for a in _equilibrium_batch(
@@ -253,19 +239,6 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
 # Minimum-jerk set-point moves (paper Section 2.3, Figure 4)
 
 
-def min_jerk_xi(s):
-    """Integral of the normalised minimum-jerk speed ``30 s⁴ − 60 s³ + 30 s²`` from 0 to ``s``
-    (clipped to [0, 1]): ``10 s³ − 15 s⁴ + 6 s⁵``, the fraction of a move done at phase ``s``."""
-    s = jnp.clip(s, 0.0, 1.0)
-    return s**3 * (10.0 + s * (-15.0 + 6.0 * s))
-
-
-def _xi_dot(s):
-    inside = (s > 0.0) & (s < 1.0)
-    s = jnp.clip(s, 0.0, 1.0)
-    return jnp.where(inside, 30.0 * s**2 * (1.0 - s) ** 2, 0.0)
-
-
 @pytree_dataclass
 class Moves:
     """Set-point moves: start times ``t0`` (M,) [s], durations ``duration`` (M,) [s] (positive)
@@ -333,7 +306,7 @@ def move_velocity(moves: Moves, t):
     _check_moves(moves)
     t = _check_times(t)
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]  # (T, M)
-    return (_xi_dot(s) / moves.duration[None, :]) @ moves.delta
+    return (minimum_jerk(s)[1] / moves.duration[None, :]) @ moves.delta
 
 
 def summed_moves(moves: Moves, start, t):
@@ -349,4 +322,4 @@ def summed_moves(moves: Moves, start, t):
     start = jnp.asarray(start, float)
     t = _check_times(t)
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]
-    return start[None, :] + min_jerk_xi(s) @ moves.delta, move_velocity(moves, t)
+    return start[None, :] + minimum_jerk(s)[0] @ moves.delta, move_velocity(moves, t)

@@ -23,7 +23,7 @@ Subsumption layers (higher ones suppress the lower):
   move returns the set-point to the rest primitive; targets suppressed until ``release``.
 
 Everything is ``jnp.where`` on the state, so a batch of arms in different modes runs in lock-step.
-Set-points integrate the summed move velocities exactly over each step (``primitives.min_jerk_xi``).
+Set-points integrate the summed move velocities exactly over each step (``minimum_jerk`` of ``pmpjax._base.profiles``).
 """
 
 from __future__ import annotations
@@ -34,10 +34,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass, static_field
 from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
 from .arm import ArmTrajectory, CogArm, check_arm, run_controller
-from .primitives import min_jerk_xi
 
 REACH, GRASP, WITHDRAW, LEAD = 0, 1, 2, 3
 IDLE_T0 = -2.0  # start of an idle slot's (empty, duration 1 s) move: it ended before t = 0
@@ -220,7 +220,7 @@ class ReflexNetwork:
         end = s.t0 + s.duration
         k = jnp.argmin(end)  # a free (idle or finished) slot if there is one: those end <= t
         # Only when every slot is busy: the earliest-ending move hands its remainder to the new one.
-        remainder = delta[k] * (1.0 - min_jerk_xi((t - s.t0[k]) / s.duration[k]))
+        remainder = delta[k] * (1.0 - minimum_jerk((t - s.t0[k]) / s.duration[k])[0])
         new_delta = goal - target_end + remainder
         delta = jnp.where(add, delta.at[k].set(new_delta), delta)
         t0 = jnp.where(add, s.t0.at[k].set(t), s.t0)
@@ -245,7 +245,7 @@ class ReflexNetwork:
         # While grasping, extra damping through the set-point brakes the arm and keeps it still.
         command = jnp.where(mode == GRASP, q_set - self.grasp_damping * obs.qdot / K, q_set)
         # Exact integral of the summed minimum-jerk velocities over [t, t + dt].
-        inc = (min_jerk_xi((t + self.dt - t0) / duration) - min_jerk_xi((t - t0) / duration)) @ delta
+        inc = (minimum_jerk((t + self.dt - t0) / duration)[0] - minimum_jerk((t - t0) / duration)[0]) @ delta
         state = ReflexState(
             q_set=q_set + inc,
             target_end=target_end,

@@ -1,0 +1,57 @@
+"""The internal surface: kernels and helpers that ``fitting`` (and other packages built on pmpjax)
+use beside the public API of ``pmpjax``. Like ``equinox.internal``: documented and tested, but not
+part of the stable API — names here may change between releases without deprecation.
+
+``fitting`` imports from ``pmpjax`` and from here only, never from a private module; a test
+(tests/test_public_api.py) keeps it so.
+"""
+
+# Leading batch axes and padding (pmpjax/_base/batching.py)
+from ._base.batching import bucket as bucket
+from ._base.batching import pad_rows as pad_rows
+
+# Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first
+from ._base.linalg import det as det
+from ._base.linalg import mv as mv
+from ._base.linalg import to_soa as to_soa
+
+# The minimum-jerk profile shared by planners, set-point moves and synthetic data
+from ._base.profiles import minimum_jerk as minimum_jerk
+
+# Pytrees
+from ._base.pytree import pytree_dataclass as pytree_dataclass
+from ._base.pytree import replace as replace
+
+# Input validation: clear errors naming the argument, raised before tracing
+from ._base.validate import as_array as as_array
+from ._base.validate import check_finite_masked as check_finite_masked
+from ._base.validate import check_positive as check_positive
+from ._base.validate import check_positive_int as check_positive_int
+from ._base.validate import check_spd as check_spd
+from ._base.validate import csv_floats as csv_floats
+from ._base.validate import is_concrete as is_concrete
+
+# Data
+from ._data.hugmp import hugmp_directory as hugmp_directory
+
+# λ0-PMP kernels: one equilibrium (no checks, vmappable), the RK4 integrator, the one weighted
+# pseudo-inverse in its diagonal-weight SoA forms
+from ._pmp.equilibria import equilibrium_one as equilibrium_one
+from ._pmp.integrate import integrate as integrate
+from ._pmp.redundancy import pinv_apply_diag_soa as pinv_apply_diag_soa
+from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
+
+# Springy arm: argument checks and the per-item gravity equilibrium
+from ._springy_arm.arm import check_arm as check_arm
+from ._springy_arm.primitives import arm_equilibrium_one as arm_equilibrium_one
+from ._springy_arm.primitives import check_set_point as check_set_point
+from ._springy_arm.primitives import check_stiffness as check_stiffness
+
+# Wrist pointing: the normalised-time model movements and the trial bookkeeping behind
+# ``fitting.analyze_pointing`` / ``predict_pointing`` / ``fit_time_constants``
+from ._wrist.pointing import MODEL_DT as MODEL_DT
+from ._wrist.pointing import MODEL_SPAN as MODEL_SPAN
+from ._wrist.pointing import drop_trials as drop_trials
+from ._wrist.pointing import model_grid as model_grid
+from ._wrist.pointing import normalised_movements as normalised_movements
+from ._wrist.pointing import trial_problems as trial_problems
