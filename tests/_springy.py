@@ -3,21 +3,16 @@ test_springy_reflexes.py, test_springy_rollouts.py): plain C MuJoCo ``mj_step`` 
 in ``qfrc_applied``), settled C rollouts for statics, central differences, the paper's
 minimum-jerk velocity formula. (Each test file defines its own module-scoped arm fixtures.)"""
 
+import _reference
 import mujoco
 import numpy as np
 
 
-def central_diff(f, x0, *, scale=None):
-    """Central differences of scalar ``f`` at ``x0`` with step ``sqrt(eps)·max(|x|, scale)``."""
+def central_diff(f, x0):
+    """Central differences of scalar ``f`` at ``x0``, shaped like ``x0`` (the suite's one helper,
+    ``_reference.central_diff``)."""
     x0 = np.asarray(x0, float)
-    scale = np.maximum(np.abs(x0), 1.0 if scale is None else scale)
-    h = np.sqrt(np.finfo(float).eps) * scale
-    g = np.zeros(x0.size)
-    for i in range(x0.size):
-        e = np.zeros(x0.size)
-        e[i] = h.flat[i]
-        g[i] = (f(x0 + e.reshape(x0.shape)) - f(x0 - e.reshape(x0.shape))) / (2 * h.flat[i])
-    return g.reshape(x0.shape)
+    return _reference.central_diff(f, x0).reshape(x0.shape)
 
 
 def c_replay(arm, q_set, *, q0, qdot0=None, probe=None, force=None, K=None, B=None):
