@@ -84,7 +84,8 @@ def _parse_name(path, where, name, n, cfg, ptype):
                           f"{', '.join(_SCALARS)}, model.KJ[i,j], model.q_rest_deg[i], simulation.q0_deg[i]")
     base, i, j = m.group(1), int(m.group(2)), m.group(3)
     if (base == "model.KJ") != (j is not None):
-        raise ConfigError(f"{path}: {where}.{name}: {base} takes {'two indices [i,j]' if base == 'model.KJ' else 'one index [i]'}")
+        idx = "two indices [i,j]" if base == "model.KJ" else "one index [i]"
+        raise ConfigError(f"{path}: {where}.{name}: {base} takes {idx}")
     j = None if j is None else int(j)
     if i >= n or (j is not None and j >= n):
         raise ConfigError(f"{path}: {where}.{name}: index out of range for a chain of {n} joints (0-based)")
@@ -200,7 +201,8 @@ def build_sweep(path):
     metrics = sw.get("metrics", ["A_net", "A_sum", "final_error"])
     if (not isinstance(metrics, list) or not metrics or any(m not in METRICS for m in metrics)
             or len(set(metrics)) != len(metrics)):
-        raise ConfigError(f"{path}: sweep.metrics must be a list of distinct names from {list(METRICS)}, got {metrics!r}")
+        raise ConfigError(f"{path}: sweep.metrics must be a list of distinct names from {list(METRICS)}, "
+                          f"got {metrics!r}")
     chunk = sw.get("chunk_size", 64)
     if not (isinstance(chunk, int) and not isinstance(chunk, bool) and chunk >= 1):
         raise ConfigError(f"{path}: sweep.chunk_size must be a positive integer, got {chunk!r}")
@@ -237,9 +239,8 @@ def build_sweep(path):
     T = len(targets)
 
     def row_fn(p):
-        KJ, q_rest, q0, tau0, k, tau = _row_values(
-            {**base, "KJ": jnp.asarray(base["KJ"]), "q_rest": jnp.asarray(base["q_rest"]), "q0": jnp.asarray(base["q0"])},
-            parsed, p, jnp)
+        row_base = {**base, **{key: jnp.asarray(base[key]) for key in ("KJ", "q_rest", "q0")}}
+        KJ, q_rest, q0, tau0, k, tau = _row_values(row_base, parsed, p, jnp)
         W = pj.damping_from_stiffness(KJ, tau0) if base["W"] is None else jnp.asarray(base["W"])
         if mtype == "lambda0":
             mdl = pj.Lambda0PMP(chain, KJ=KJ, q_rest=q_rest, W=W)
@@ -291,8 +292,9 @@ def run_sweep_config(path, out=None, *, progress: bool = False) -> dict:
                         *(f"{res.outputs[m][r, j]:.10g}" for m in metrics for j in range(len(names))),
                         int(res.status[r]), res.reason(r)])
     summary = {
-        "config": str(path), "out": str(out), "rows": N, "chunk_size": opt["chunk_size"], "chunks_computed": res.chunks_computed,
-        "chunks_reused": res.chunks_reused, "failed": res.n_failed, "targets": list(names), "metrics": metrics,
+        "config": str(path), "out": str(out), "rows": N, "chunk_size": opt["chunk_size"],
+        "chunks_computed": res.chunks_computed, "chunks_reused": res.chunks_reused, "failed": res.n_failed,
+        "targets": list(names), "metrics": metrics,
         "parameters": {p: np.asarray(v).tolist() for p, v in params.items()},
         "outputs": {m: np.asarray(res.outputs[m]).tolist() for m in metrics},
         "status": res.status.tolist(), "reasons": [res.reason(r) for r in range(N)],
@@ -343,9 +345,10 @@ def _plot(path, params, axes, values, metric, names):
 
 
 def add_sweep(sub) -> None:
-    p = sub.add_parser("sweep", help="sweep model/planner parameters of movements described in a TOML/JSON file "
-                       "(chunked, resumable)", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("config", help="TOML or JSON configuration file ([chain], [model], [planner], [simulation], [sweep])")
+    p = sub.add_parser("sweep", help="sweep model/planner parameters of movements described in a TOML/JSON "
+                       "file (chunked, resumable)", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("config", help="TOML or JSON file ([chain], [model], [planner], [simulation], [sweep])")
     p.add_argument("--out", help="output folder (default: sweep.out of the file, else out_sweep)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
