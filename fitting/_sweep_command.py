@@ -238,10 +238,12 @@ def build_sweep(path):
     tg = jnp.asarray(targets)
     T = len(targets)
 
-    def row_fn(p):
-        row_base = {**base, **{key: jnp.asarray(base[key]) for key in ("KJ", "q_rest", "q0")}}
-        KJ, q_rest, q0, tau0, k, tau = _row_values(row_base, parsed, p, jnp)
-        W = pj.damping_from_stiffness(KJ, tau0) if base["W"] is None else jnp.asarray(base["W"])
+    def make(KJ, q_rest, tau0, k, tau):
+        """Model and planner of one row (JAX values) or of all rows at once (NumPy, leading N)."""
+        if base["W"] is not None:
+            W = jnp.asarray(base["W"])
+        else:
+            W = pj.damping_from_stiffness(KJ, jnp.broadcast_to(tau0, jnp.shape(KJ)[:-2]))
         if mtype == "lambda0":
             mdl = pj.Lambda0PMP(chain, KJ=KJ, q_rest=q_rest, W=W)
         elif mtype == "pmp2":
@@ -249,11 +251,27 @@ def build_sweep(path):
         else:
             mdl = pj.PMP1(chain, W=W)
         if ptype == "arimoto":
-            pl = (pj.ArimotoPlanner(k=k, tau=tau) if k is not None else pj.ArimotoPlanner(k=None, tau=tau, tau0=tau0))
+            pl = pj.ArimotoPlanner(k=k, tau=tau) if k is not None else pj.ArimotoPlanner(k=None, tau=tau, tau0=tau0)
         elif ptype == "constant":
             pl = pj.ConstantPlanner(k=k)
         else:
             pl = planner
+        return mdl, pl
+
+    # simulate's RK4 step check on every row at once (it is skipped inside the traced kernel).
+    from pmpjax._pmp.simulate import _check_stability
+
+    N = len(next(iter(params.values())))
+    mdl_all, pl_all = make(KJ, q_rest, t0, k, tau)
+    try:
+        _check_stability(mdl_all, pl_all, q0s, (N,), dur / max(1, math.ceil(dur / dt - 1e-9)))
+    except ValueError as e:
+        raise ConfigError(f"{path}: simulation.dt: in some row of the sweep, {e}") from None
+
+    def row_fn(p):
+        row_base = {**base, **{key: jnp.asarray(base[key]) for key in ("KJ", "q_rest", "q0")}}
+        KJ, q_rest, q0, tau0, k, tau = _row_values(row_base, parsed, p, jnp)
+        mdl, pl = make(KJ, q_rest, tau0, k, tau)
         tr = pj.simulate(mdl, pl, jnp.broadcast_to(q0, (T, n)), tg, duration=dur, dt=dt)
         res = {}
         if "A_net" in metrics or "A_sum" in metrics:
@@ -265,8 +283,6 @@ def build_sweep(path):
         out["status"] = tr.status
         return out
 
-    if ptype == "constant" and "planner.k" not in parsed:
-        base["k"] = float(planner.k)
     row_fn.__qualname__ = "sweep_config_row"
     return row_fn, params, axes, {"chunk_size": chunk, "out": out, "metrics": list(metrics), "names": opt["names"],
                                   "targets": np.asarray(targets)}

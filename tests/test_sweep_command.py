@@ -114,6 +114,7 @@ BASE = '[model]\nKJ_diag = [0.5, 1.5, 2.0]\n[planner]\nk = 22.5\ntau = 0.08\n'
     (BASE + "[sweep.sample]\nn = 6\nbounds = {'model.tau0' = [0.05, 0.1]}\n", "power of two"),
     (BASE + "[sweep.sample]\nmethod = 'random'\nn = 4\n", "sweep.sample.method"),
     (BASE + "[sweep.sample]\nn = 4\nbounds = {'model.tau0' = [0.1, 0.05]}\n", "low < high"),
+    (BASE + "[sweep.grid]\n'model.tau0' = [0.08, 0.0005]\n", "simulation.dt: in some row of the sweep, `dt`=0.001"),
     ('[model]\nKJ_diag = [1, 1, 1]\nW = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n[sweep.grid]\n"model.tau0" = [0.1]\n',
      "cannot sweep"),
 ])
