@@ -17,9 +17,11 @@ import itertools
 
 import numpy as np
 
-# Reflex scenarios [s]: reach forward (up) and back to rest, touched on the way out.
-REACH = ((0.0, 2), (1.2, 0))  # (time, primitive index): out to 'up' then back to 'rest'
-TOUCH = (0.5, 0.55)  # the touch on the palm (grasp) or the back of the hand (withdrawal)
+# Reflex scenarios [s]: reach forward (up) and back to rest, out again, touched on the way out; a
+# later target to 'side' must be suppressed by the reflex.
+REACH = ((0.0, 2), (1.0, 0), (2.0, 2), (3.0, 3))  # (time, primitive index)
+TOUCH = (2.4, 2.45)  # the touch on the palm (grasp) or the back of the hand (withdrawal)
+DURATION = 3.6
 LEAD_ON, PUSH, PUSH_N = (1.6, 2.6), (1.8, 2.4), 15.0  # lead active; upward push on the hand [s], [N]
 
 
@@ -133,7 +135,7 @@ def primitives_part(ctx) -> dict:
                "Williamson (1996) Section 2.2 / Figure 2: convergent force fields (frog spinal cord).")
 
     # --- Figures 8-10: reflexes on C MuJoCo ------------------------------------------------------
-    dur = 3.0
+    dur = DURATION
     T = int(round(dur / arm.dt))
     t = np.arange(T) * arm.dt
     targets = [(tk, P[j]) for tk, j in REACH]
@@ -168,7 +170,14 @@ def primitives_part(ctx) -> dict:
         ("lead", "primitives_lead.png", "torque", "Williamson (1996) Figure 10: when the torque departs from its "
          "reference the set-point is backed off, so the arm is led."),
     )):
-        ctx.figure(plot_reflex(one(i), joint=0, sensor=sensor, title=name), fname,
+        fig = plot_reflex(one(i), joint=0, sensor=sensor, title=name)
+        if sensor != "torque":  # the touch is scripted (no probe contact): show the scripted reading
+            ax = fig.axes[0]
+            ax.lines[0].set_ydata(np.asarray(inputs.touch)[i, :, ("palm", "back").index(sensor)])
+            ax.relim()
+            ax.autoscale_view()
+            ax.set_ylabel(f"{sensor} touch [N] (scripted)")
+        ctx.figure(fig, fname,
                    f"Reflex network on C MuJoCo, {name}: shoulder-flexion set-point (solid) and actual angle "
                    f"(dashed), with the {'touch sensor' if sensor != 'torque' else 'torque and its lead reference'}.",
                    paper)
