@@ -155,9 +155,11 @@ def figure4_part(ctx: PartContext) -> dict:
 
 
 def primitives_part(ctx: PartContext) -> dict:
-    """Postural primitives of Williamson (1996) beyond Figure 4: gravity equilibria of the primitives and
-    their blends vs winner-take-all (Figs 3, 5), the convergent force field of a posture (Fig 2), and the
-    grasp, withdrawal and lead reflexes (Figs 8-10), forward rollouts on C MuJoCo."""
+    """Williamson (1996) beyond Figure 4: primitives under gravity, blends vs winner-take-all, reflexes.
+
+    Gravity equilibria of the primitives and their blends vs winner-take-all (Figs 3, 5), the convergent
+    force field of a posture (Fig 2), and the grasp, withdrawal and lead reflexes (Figs 8-10); forward
+    rollouts on C MuJoCo."""
     from ._springy_arm.main_job import primitives_part as run
 
     return run(ctx)

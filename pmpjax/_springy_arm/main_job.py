@@ -46,9 +46,11 @@ def _c_hand(arm, q) -> np.ndarray:
 
 
 def primitives_part(ctx) -> dict:
-    """Postural primitives of Williamson (1996) beyond Figure 4: gravity equilibria of the primitives and
-    their blends vs winner-take-all (Figs 3, 5), the convergent force field of a posture (Fig 2), and the
-    grasp, withdrawal and lead reflexes (Figs 8-10), forward rollouts on C MuJoCo."""
+    """Williamson (1996) beyond Figure 4: primitives under gravity, blends vs winner-take-all, reflexes.
+
+    Gravity equilibria of the primitives and their blends vs winner-take-all (Figs 3, 5), the convergent
+    force field of a posture (Fig 2), and the grasp, withdrawal and lead reflexes (Figs 8-10); forward
+    rollouts on C MuJoCo."""
     import jax
     import matplotlib.pyplot as plt
 
