@@ -273,3 +273,6 @@ def add_commands(sub) -> None:
     add_fit_donders(sub)
     add_ik_weights(sub)
     add_analyze_pointing(sub)
+    from ._sweep_command import add_sweep
+
+    add_sweep(sub)

@@ -7,7 +7,7 @@ CSV/JSON tables, ``results.json`` and a report (``report.html``, self-contained,
 re-run skips parts already finished (with the same ``--quick``) unless ``--force``; a failing
 part is reported and the others still run (exit status 1 when any part failed).
 
-Parts are built in (Figure 3, Figure 4) or registered by installed packages under the
+Parts are built in (Figure 3, Figure 4, the postural primitives) or registered by installed packages under the
 ``pmpjax.jobs`` entry-point group (``fitting`` registers its fits there, so ``pmpjax`` never
 imports ``fitting``). A part is ``part(ctx: PartContext) -> dict`` (JSON-able results); it
 records its figures and tables with ``ctx.figure`` and ``ctx.table``. Subcommands for users'
@@ -154,6 +154,17 @@ def figure4_part(ctx: PartContext) -> dict:
             "velocity_jump_max": float(np.abs(np.diff(v[:, 0])).max())}
 
 
+def primitives_part(ctx: PartContext) -> dict:
+    """Williamson (1996) beyond Figure 4: primitives under gravity, blends vs winner-take-all, reflexes.
+
+    Gravity equilibria of the primitives and their blends vs winner-take-all (Figs 3, 5), the convergent
+    force field of a posture (Fig 2), and the grasp, withdrawal and lead reflexes (Figs 8-10); forward
+    rollouts on C MuJoCo."""
+    from ._springy_arm.main_job import primitives_part as run
+
+    return run(ctx)
+
+
 # ----------------------------------------------------------------------------- running parts
 
 
@@ -161,7 +172,7 @@ def available_parts() -> dict[str, Callable]:
     """Built-in parts, then entry points of the ``pmpjax.jobs`` group, in ``PART_ORDER``."""
     from importlib.metadata import entry_points
 
-    parts: dict[str, Callable] = {"figure3": figure3_part, "figure4": figure4_part}
+    parts: dict[str, Callable] = {"figure3": figure3_part, "figure4": figure4_part, "primitives": primitives_part}
     for ep in entry_points(group="pmpjax.jobs"):
         parts.setdefault(ep.name, ep)
     rank = {n: i for i, n in enumerate(PART_ORDER)}
