@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax._config import ConfigError, build_simulation, read_config
+from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, read_config
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
@@ -259,12 +259,10 @@ def build_sweep(path):
         return mdl, pl
 
     # simulate's RK4 step check on every row at once (it is skipped inside the traced kernel).
-    from pmpjax._pmp.simulate import _check_stability
-
     N = len(next(iter(params.values())))
     mdl_all, pl_all = make(KJ, q_rest, t0, k, tau)
     try:
-        _check_stability(mdl_all, pl_all, q0s, (N,), dur / max(1, math.ceil(dur / dt - 1e-9)))
+        check_rk4_stability(mdl_all, pl_all, q0s, (N,), dur / max(1, math.ceil(dur / dt - 1e-9)))
     except ValueError as e:
         raise ConfigError(f"{path}: simulation.dt: in some row of the sweep, {e}") from None
 

@@ -31,6 +31,11 @@ from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import is_concrete as is_concrete
 
+# Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
+from ._config import ConfigError as ConfigError
+from ._config import build_simulation as build_simulation
+from ._config import read_config as read_config
+
 # Data
 from ._data.hugmp import hugmp_directory as hugmp_directory
 
@@ -41,6 +46,8 @@ from ._pmp.integrate import integrate as integrate
 from ._pmp.redundancy import pinv_apply_diag_soa as pinv_apply_diag_soa
 from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
 
+# simulate's RK4 stability check (model, planner, q0, batch, step) -> None or ValueError, for
+# callers that trace simulate inside their own kernels (the check is skipped under tracing)
 # Springy arm: argument checks and the per-item gravity equilibrium
 from ._springy_arm.arm import check_arm as check_arm
 from ._springy_arm.primitives import arm_equilibrium_one as arm_equilibrium_one

@@ -1,0 +1,155 @@
+"""Benchmark: first-call (compile) and second-call (run) time of every public entry point that
+compiles, at the sizes of the main job's ``--quick`` parts.
+
+Each case runs in a fresh subprocess with JAX's persistent compilation cache off, calls the entry
+point twice on the same inputs and reports ``first − second`` as compile time (tracing, lowering,
+XLA compilation and one-off host work) and ``second`` as run time. Baseline in the same run: the
+issue's budget of 3 s per first call (the ratio column is budget / compile; ≥ 1 meets it).
+
+Usage: ``python benchmarks/compile_times.py [--only CASE ...] [--quick]`` (``--quick`` runs two
+cheap cases and writes nothing).
+
+Latest figures: see the table written by the run below (pasted after each idle run).
+"""
+
+# ruff: noqa: E501  (the pasted result tables above)
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BUDGET_S = 3.0
+
+# Each case: (what it runs, setup code, call expression). Setup runs once; the call twice.
+CASES: dict[str, tuple[str, str, str]] = {
+    "simulate": (
+        "pj.simulate, Figure 3 wrist, 8 targets, 0.4 s at dt = 1 ms, every step saved",
+        "m = pj.Lambda0PMP(pj.Wrist(1.0), KJ=np.diag([.5, 1.5, 2.]), q_rest=np.deg2rad([5., 0, 0]), W=0.08 * np.diag([.5, 1.5, 2.]))\n"
+        "tg = np.stack(list(pj.center_out_targets().values()))",
+        "pj.simulate(m, pj.ArimotoPlanner(k=22.5, tau=0.08), np.deg2rad([5., 0, 0]), tg, duration=0.4).q.block_until_ready()",
+    ),
+    "simulate_final": (
+        "pj.simulate, same problem, SaveAt(final=True)",
+        "m = pj.Lambda0PMP(pj.Wrist(1.0), KJ=np.diag([.5, 1.5, 2.]), q_rest=np.deg2rad([5., 0, 0]), W=0.08 * np.diag([.5, 1.5, 2.]))\n"
+        "tg = np.stack(list(pj.center_out_targets().values()))",
+        "pj.simulate(m, pj.ArimotoPlanner(k=22.5, tau=0.08), np.deg2rad([5., 0, 0]), tg, duration=0.4, saveat=pj.SaveAt(final=True)).q.block_until_ready()",
+    ),
+    "grad_simulate": (
+        "jax.grad of a path loss through pj.simulate w.r.t. KJ (Figure 3 problem, 8 targets)",
+        "tg = np.stack(list(pj.center_out_targets().values()))\n"
+        "def loss(KJ):\n"
+        "    m = pj.Lambda0PMP(pj.Wrist(1.0), KJ=KJ, q_rest=np.deg2rad([5., 0, 0]), W=0.08 * KJ)\n"
+        "    return jnp.sum(pj.simulate(m, pj.ArimotoPlanner(k=22.5, tau=0.08), np.deg2rad([5., 0, 0]), tg, duration=0.4, saveat=pj.SaveAt(every=20)).x ** 2)\n"
+        "g = jax.jit(jax.grad(loss))",
+        "g(jnp.diag(jnp.array([.5, 1.5, 2.]))).block_until_ready()",
+    ),
+    "equilibrium_posture": (
+        "pj.equilibrium_posture, wrist, 64 targets",
+        "tg = 0.2 * np.random.default_rng(0).uniform(-1, 1, (64, 2))",
+        "pj.equilibrium_posture(pj.Wrist(1.0), np.diag([.5, 1.5, 2.]), np.deg2rad([5., 0, 0]), tg).q.block_until_ready()",
+    ),
+    "figure3_data": ("pj.figure3_data (main job part figure3)", "", "pj.figure3_data()"),
+    "fit_donders": (
+        "fitting.fit_donders, 6 Table subjects x 500 postures, NIO (main job part donders_nio)",
+        "names, KJ, qr = pj.paper_subjects()\n"
+        "rec = pj.synthetic_recordings(KJ, qr, 500, noise_deg=0.5, seed=0, names=names)",
+        "fitting.fit_donders(pj.Wrist(), rec.pointing, rec.joint_angles, mask=rec.mask, n_starts=2)",
+    ),
+    "estimate_ik_weights": (
+        "fitting.estimate_ik_weights, the IK paper's Figure 1 data, 100 repetitions",
+        "q, x, J = fitting.ik_fig1_data(jax.random.PRNGKey(0), n_reps=100)",
+        "fitting.estimate_ik_weights(q, x, J, gamma=0.6).w.block_until_ready()",
+    ),
+    "estimate_ik_weights_lm": (
+        "fitting.estimate_ik_weights_lm, same data",
+        "q, x, J = fitting.ik_fig1_data(jax.random.PRNGKey(0), n_reps=100)",
+        "fitting.estimate_ik_weights_lm(q, x, J, gamma=0.6).w.block_until_ready()",
+    ),
+    "pointing_pipeline": (
+        "fitting.analyze_pointing + predict_pointing, 2 subjects x 3 trials (main job --quick)",
+        "exp = pj.synthetic_pointing_experiment(subjects=('subj1', 'subj4'), n_trials=3, target_spread=0.0, n_donders=64, seed=0)\n"
+        "KJ, qr = exp.truth['KJ'], exp.truth['q_rest']",
+        "fitting.predict_pointing(fitting.analyze_pointing(exp.recording), KJ, qr)",
+    ),
+    "fit_time_constants": (
+        "fitting.fit_time_constants, 2 subjects x 3 trials (main job --quick)",
+        "exp = pj.synthetic_pointing_experiment(subjects=('subj1', 'subj4'), n_trials=3, target_spread=0.0, n_donders=64, seed=0)\n"
+        "an = fitting.analyze_pointing(exp.recording); KJ, qr = exp.truth['KJ'], exp.truth['q_rest']",
+        "fitting.fit_time_constants(an, KJ, qr)",
+    ),
+    "arm_equilibrium": (
+        "pj.arm_equilibrium, springy arm, 8 blends (MJX kinematics, Newton)",
+        "arm = pj.load_arm(contacts=False); P = pj.default_primitives()\n"
+        "a = np.random.default_rng(0).dirichlet(np.ones(4), 8)",
+        "pj.arm_equilibrium(arm, pj.blend(a, P)).q.block_until_ready()",
+    ),
+    "rollout_mjx": (
+        "pj.rollout backend='mjx', springy arm, 4 set-point runs x 200 steps",
+        "arm = pj.load_arm(contacts=False); qs = np.broadcast_to(pj.default_primitives()[:, None], (4, 200, 6))",
+        "pj.rollout(arm, qs, backend='mjx').q.block_until_ready()",
+    ),
+    "rollout_mujoco": (
+        "pj.rollout backend='mujoco' (C MuJoCo, no compile), same runs",
+        "arm = pj.load_arm(contacts=False); qs = np.broadcast_to(pj.default_primitives()[:, None], (4, 200, 6))",
+        "pj.rollout(arm, qs, backend='mujoco').q",
+    ),
+}
+
+CHILD = """
+import time, numpy as np, jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
+import pmpjax as pj, fitting
+{setup}
+t0 = time.perf_counter(); {call}; t1 = time.perf_counter(); {call}; t2 = time.perf_counter()
+print("RESULT", t1 - t0, t2 - t1)
+"""
+
+
+def run_case(name: str) -> dict:
+    what, setup, call = CASES[name]
+    code = CHILD.format(setup=setup, call=call)
+    env = {**os.environ, "JAX_ENABLE_COMPILATION_CACHE": "false", "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")), None)
+    if proc.returncode or line is None:
+        return {"case": name, "what": what, "error": (proc.stderr.strip().splitlines() or ["?"])[-1]}
+    first, second = map(float, line.split()[1:])
+    return {"case": name, "what": what, "first_s": first, "run_s": second, "compile_s": max(first - second, 0.0)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", nargs="*")
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    names = args.only or (["equilibrium_posture", "rollout_mujoco"] if args.quick else list(CASES))
+    rows = []
+    print(f"load average {os.getloadavg()[0]:.1f}", flush=True)
+    print(f"{'case':24s} {'compile [s]':>11s} {'run [s]':>9s}  budget {BUDGET_S:g} s")
+    for n in names:
+        r = run_case(n)
+        rows.append(r)
+        if "error" in r:
+            print(f"{n:24s} ERROR {r['error']}", flush=True)
+        else:
+            ok = "yes" if r["compile_s"] <= BUDGET_S else "no"
+            print(f"{n:24s} {r['compile_s']:11.2f} {r['run_s']:9.3f}  {ok}", flush=True)
+    out = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load": os.getloadavg()[0],
+           "budget_s": BUDGET_S, "rows": rows,
+           "ratios": {f"budget/compile {r['case']}": BUDGET_S / max(r["compile_s"], 1e-3)
+                      for r in rows if "compile_s" in r},
+           "targets": {f"budget/compile {r['case']}": 1.0 for r in rows if "compile_s" in r}}
+    if not args.quick:
+        res = Path(os.environ.get("PMPJAX_BENCH_RESULTS", Path(__file__).parent / "results"))
+        res.mkdir(parents=True, exist_ok=True)
+        (res / "compile_times.json").write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
