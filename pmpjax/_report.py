@@ -39,7 +39,8 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
     rows_html = []
     for name, entry in _parts(results):
         status = entry.get("status", "?")
-        md.append(f"| [{name}](#{name}) | {status} | {entry.get('seconds', '')} | {entry.get('doc', '')} |")
+        summary = " ".join(entry.get("doc", "").split())  # one table row, however the docstring wraps
+        md.append(f"| [{name}](#{name}) | {status} | {entry.get('seconds', '')} | {summary} |")
         cls = "ok" if status == "ok" else "failed"
         rows_html.append(
             f"<tr><td><a href='#{name}'>{name}</a></td><td class='{cls}'>{status}</td>"
