@@ -85,7 +85,9 @@ def test_fitting_uses_only_the_public_and_internal_surfaces_of_pmpjax():
     assert not private, f"fitting imports private pmpjax modules: {private}"
     upward = [f"{f}:{n} {m}" for f, n, m in _imports("pmpjax") if m.split(".")[0] == "fitting"]
     assert not upward, f"pmpjax imports fitting: {upward}"
-    import pmpjax.internal as internal
+    import importlib
+    import pkgutil
 
-    names = [n for n in dir(internal) if not n.startswith("_")]
-    assert names and all(getattr(internal, n) is not None for n in names)
+    for pkg in (pj, fitting):  # every module imports (a name missing from pmpjax.internal fails here)
+        for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
+            importlib.import_module(m.name)
