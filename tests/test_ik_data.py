@@ -38,6 +38,12 @@ def test_synthetic_dataset_layout(dataset):
     assert np.allclose(tr["J"][::17], [arm4_jac(q) for q in tr["q"][::17]], atol=1e-12)
     w = np.array([[d[c] for c in ("Natural", "Viscous")] for d in dataset["w_true"]])
     assert np.all(w[:, 1, 2] > 3 * w[:, 0, 2])  # joint 3 is much costlier in the viscous field
+    # Human-like reaches: every goal is inside the README arm's reach and every trial stays clear
+    # of the straight-elbow singularity (joint speeds of a 1 s reach stay below 5 rad/s; goals out
+    # of reach once gave 1e5 rad/s).
+    trials = [tr for d in parts for c in d.values() for t in c.values() for tr in t]
+    assert max(np.abs(tr["qdot"]).max() for tr in trials) < 5.0
+    assert min(np.linalg.svd(tr["J"], compute_uv=False)[:, -1].min() for tr in trials) > 0.05
 
 
 def _equal_datasets(a, b):

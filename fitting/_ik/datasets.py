@@ -31,7 +31,11 @@ W_VISCOUS = (1.0, 0.132, 0.643, 1.0)
 CONDITIONS = ("Natural", "Viscous")
 TARGETS = ("Target1", "Target2", "Target3")
 # hand displacement [m] from the start posture: 1 high, 2 forward, 3 inward
-_TARGET_OFFSETS = np.array([[0.10, 0.0, 0.20], [0.25, 0.0, 0.02], [0.10, 0.20, 0.05]])
+# Up, towards the body, sideways from the start hand position (|x0| ≈ 0.54 m): goals 0.43–0.57 m
+# from the shoulder, inside the 0.63 m reach with margin. (Earlier offsets put Target2 at 0.76 m,
+# out of reach: those reaches ran into the straight-elbow singularity at up to 1e5 rad/s.)
+_TARGET_OFFSETS = np.array([[0.05, 0.0, 0.20], [-0.15, 0.0, 0.05], [0.0, 0.20, 0.05]])
+_REACH_MARGIN = 0.92  # goals farther than this fraction of L1 + L2 from the shoulder are refused
 _Q0 = np.array([-0.35, -0.45, -0.10, 1.10])
 
 
@@ -107,6 +111,11 @@ def synthetic_ik_dataset(seed: int = 0, *, n_participants: int = 17, n_trials: i
     q0 = np.broadcast_to(q0p[:, None, None, None], shape + (4,)) + 0.02 * rng.standard_normal(shape + (4,))
     x0 = np.asarray(chain.fk(q0))
     goal = x0 + _TARGET_OFFSETS[None, None, :, None] + 0.01 * rng.standard_normal(shape + (3,))
+    reach = float(getattr(chain, "L1", np.inf) + getattr(chain, "L2", 0.0))
+    far = np.linalg.norm(goal, axis=-1) > _REACH_MARGIN * reach
+    if np.any(far) or not np.all(chain.reachable(goal)):
+        raise ValueError(f"`chain`: {int(np.sum(far))} synthetic goals lie beyond {_REACH_MARGIN:.0%} of its reach "
+                         f"({reach:.3g} m); the reaches would run into the straight-elbow singularity")
     wt = np.broadcast_to(w[:, :, None, None], shape + (4,))
     B = int(np.prod(shape))
     f = lambda a: jnp.asarray(a.reshape(B, -1).T)  # noqa: E731
