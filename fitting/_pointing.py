@@ -481,7 +481,7 @@ def _silverman_weights(bandwidth, h, J):
     """Discrete equivalent kernel of a cubic smoothing spline (Silverman 1984):
     ``K(u) = ½ e^{−|u|/√2} sin(|u|/√2 + π/4)`` at offsets ``j·h``, ``|j| ≤ J``, for bandwidths
     (B,) in the grid's units; normalised to sum 1. (B, 2J + 1)."""
-    u = jnp.abs(jnp.arange(-J, J + 1) * h)[None, :] / bandwidth[:, None]
+    u = jnp.abs(jnp.arange(-J, J + 1, dtype=float) * h)[None, :] / bandwidth[:, None]
     w = 0.5 * jnp.exp(-u / np.sqrt(2)) * jnp.sin(u / np.sqrt(2) + np.pi / 4)
     return w / jnp.sum(w, axis=1, keepdims=True)
 

@@ -70,7 +70,7 @@ def _reach(chain, q0, x_goal, w, k_pos, k_null, dt):
     def save(t, q, args):
         return q, field(t, q, args)
 
-    t0s = jnp.arange(100) * dt
+    t0s = jnp.arange(100, dtype=float) * dt
     _, (qs, qds) = integrate(field, q0, t0s, jnp.full(100, dt), 1, None, save)
     return qs, qds
 
@@ -197,7 +197,7 @@ def _prosthetic_run(chain, q0, targets, cond, w_user, q_hat, k_task, alpha, dt, 
         return q, qd, xdot, J, v
 
     def movement(y, goal):
-        t0s = jnp.arange(hold) * dt
+        t0s = jnp.arange(hold, dtype=float) * dt
         y, out = integrate(field, y, t0s, jnp.full(hold, dt), n_steps, goal, save)
         return y, out
 

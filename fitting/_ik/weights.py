@@ -552,7 +552,7 @@ def ik_model_error(w, qdot, xdot, J, gamma=0.0, *, mask=None):
     g = g.reshape((1,) + g.shape + (1,)) if g.ndim else g
     r = _model_residual(wc, qd, xd, Jc, g, valid.astype(qd.dtype))
     norm = jnp.sqrt(jnp.sum(r * r, axis=0) + 1e-300)
-    return jnp.sum(norm * valid, axis=-1) / jnp.sum(valid, axis=-1)
+    return jnp.sum(jnp.where(valid, norm, 0.0), axis=-1) / jnp.sum(valid, axis=-1, dtype=norm.dtype)
 
 
 def _lm_residual(theta, args):
