@@ -78,7 +78,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import pmpjax as pj  # noqa: E402
-from pmpjax import _simulate  # noqa: E402
+from pmpjax._pmp import simulate as _simulate  # noqa: E402
 
 SAVES = {"final": pj.SaveAt(final=True), "every10": pj.SaveAt(every=10)}
 
@@ -374,9 +374,100 @@ def render(res, big):
     return "\n".join(L)
 
 
+# ----------------------------------------------------------------------------------------------
+# --saves: what saving costs (issue 13)
+
+SAVE_MODES = {"final": pj.SaveAt(final=True), "every step": pj.SaveAt(), "every 10": pj.SaveAt(every=10),
+              "ts (40)": pj.SaveAt(ts=tuple(float(v) for v in np.arange(1, 41) * 0.01))}
+
+
+def _effort(tr):
+    """A user's loss on the saved trajectory: ∫|ẋ|² dt per movement (rectangle rule)."""
+    return jax.numpy.sum(tr.speed**2, axis=-1) * bl.DT
+
+
+def save_calls(B):
+    """``{row: (save, call)}``: batched public calls per save mode, and a loss on the every-step
+    trajectory either batched or as a user's ``jax.vmap`` over single calls."""
+    model, planner = bl.jax_problem()
+    q0, xd = jax.numpy.asarray(bl.start_postures(B)), jax.numpy.asarray(bl.targets(B))
+    sim = lambda q, x, sv: pj.simulate(model, planner, q, x, duration=bl.DURATION, dt=bl.DT, saveat=sv)  # noqa: E731
+    calls = {k: (k, lambda sv=sv: jax.block_until_ready(sim(q0, xd, sv))) for k, sv in SAVE_MODES.items()}
+    batched = jax.jit(lambda q, x: _effort(sim(q, x, pj.SaveAt())))
+    vmapped = jax.jit(jax.vmap(lambda q, x: _effort(sim(q, x, pj.SaveAt()))))
+    calls["loss, batched call (jit)"] = ("every step", lambda: jax.block_until_ready(batched(q0, xd)))
+    calls["loss, vmap of single calls (jit)"] = ("every step", lambda: jax.block_until_ready(vmapped(q0, xd)))
+    return calls
+
+
+def _usage():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime, r.ru_minflt
+
+
+def bench_saves(B, repeats):
+    """Per row: first call (trace + compile + run) [s], then the minimum wall and CPU time and
+    minor page faults per call over ``repeats`` rounds interleaved across rows (same load)."""
+    calls = save_calls(B)
+    res = {k: {"save": sv} for k, (sv, _) in calls.items()}
+    outs = {}
+    for k, (_, call) in calls.items():
+        t0 = time.perf_counter()
+        outs[k] = call()
+        res[k]["first_call_s"] = time.perf_counter() - t0
+        print(f"  {k}: first call {res[k]['first_call_s']:.1f} s", flush=True)
+    vals = {k: np.asarray(o) for k, o in outs.items() if k.startswith("loss")}
+    del outs
+    for _ in range(repeats):
+        for k, (_, call) in calls.items():
+            (c0, f0), t0 = _usage(), time.perf_counter()
+            out = call()
+            t = time.perf_counter() - t0
+            c1, f1 = _usage()
+            del out
+            r = res[k]
+            r["s"], r["cpu_s"] = min(r.get("s", np.inf), t), min(r.get("cpu_s", np.inf), c1 - c0)
+            r["minflt"] = min(r.get("minflt", np.inf), f1 - f0)
+    for r in res.values():
+        r["compile_s"] = r["first_call_s"] - r["s"]
+        r["steps_per_s"] = B * bl.N_STEPS / r["s"]
+        r["vs_final"], r["cpu_vs_final"] = r["s"] / res["final"]["s"], r["cpu_s"] / res["final"]["cpu_s"]
+    diff = float(np.max(np.abs(vals["loss, vmap of single calls (jit)"] - vals["loss, batched call (jit)"])))
+    return res, diff
+
+
+def main_saves(B, repeats, out):
+    load0 = os.getloadavg()
+    print(f"pmpjax simulate save modes — B = {B}, {bl.machine()}, jax {jax.__version__}, load {load0[0]:.2f}",
+          flush=True)
+    rows, diff = bench_saves(B, repeats)
+    res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": bl.machine(),
+           "jax": jax.__version__, "B": B, "pmpjax": os.path.dirname(pj.__file__), "rows": rows,
+           "max_abs_diff_vmap_vs_batched_loss": diff, "load_avg_start": load0, "load_avg_end": os.getloadavg()}
+    L = [f"| what (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |",
+         "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for k, r in rows.items():
+        L.append(f"| {k} | {r['save']} | {r['compile_s']:.1f} | {r['s'] * 1e3:.0f} ms | {r['cpu_s'] * 1e3:.0f} ms | "
+                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {r['minflt'] / 1e3:.0f} k |")
+    L.append(f"\nvmap-of-single-calls loss vs batched loss: max |Δ| = {diff:.1e}. "
+             f"Load average {load0[0]:.1f} → {res['load_avg_end'][0]:.1f}.")
+    print("\n" + "\n".join(L))
+    if out == "default":
+        print(f"wrote {bl.write_results('simulate_saves', res)}")
+    elif out:
+        with open(out, "w") as f:
+            json.dump(res, f, indent=1)
+        print(f"wrote {out}")
+    return res
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small smoke run; writes no JSON")
+    ap.add_argument("--saves", action="store_true",
+                    help="only the save-mode rows (every step, every 10, ts, final, vmap of a user's call)")
+    ap.add_argument("--saves-B", type=int, default=10_000, help="batch size of --saves (default 10000)")
+    ap.add_argument("--saves-out", help="JSON path of --saves (default results/simulate_saves.json)")
     ap.add_argument("--worker", choices=["memory", "pinned", "sharded"], help=argparse.SUPPRESS)
     ap.add_argument("--B", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--save", default="final", help=argparse.SUPPRESS)
@@ -388,5 +479,8 @@ if __name__ == "__main__":
         print(json.dumps(worker_pinned(a.B, 3)))
     elif a.worker == "sharded":
         print(json.dumps(worker_sharded(a.B, 3, a.out)))
+    elif a.saves:
+        main_saves(1000 if a.quick else a.saves_B, 2 if a.quick else 3,
+                   a.saves_out or (None if a.quick else "default"))
     else:
         main(a.quick)
