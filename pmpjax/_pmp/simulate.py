@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from functools import partial
 
@@ -200,10 +201,65 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         # tracing it (its jitted rate estimate would otherwise return tracers).
         with jax.ensure_compile_time_eval():
             _check_stability(model, planner, q0, batch, max(sched.hs))
-    out = _run(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs),
-               batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
-               singular_tol=float(singular_tol), single=single)
+    kernel = _kernel(batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
+                     singular_tol=float(singular_tol), single=single)
+    out = kernel(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs))
     return replace(out, t=jnp.asarray(sched.t))
+
+
+@functools.lru_cache(maxsize=256)
+def _kernel(**statics):
+    """``_run`` with these static arguments, batched efficiently under a caller's ``jax.vmap``.
+
+    Plain ``vmap`` of ``_run`` adds the mapped axis in front of the component-leading state, so
+    every stage reads strided component slices and writes one trajectory at a time. The
+    ``custom_vmap`` rule instead folds the mapped axis into the run's own (trailing, contiguous)
+    batch. ``custom_vmap`` has no derivative rules, so derivatives go through ``custom_jvp`` with
+    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``).
+    """
+    run = partial(_run, **statics)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return run(*args)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        return _vmap_rule(statics, axis_size, in_batched, args)
+
+    @jax.custom_jvp
+    def kernel(*args):
+        return batched(*args)
+
+    @kernel.defjvp
+    def _jvp(primals, tangents):
+        return jax.jvp(run, primals, tangents)
+
+    return kernel
+
+
+def _vmap_rule(statics, axis_size, in_batched, args):
+    """Mapped leaves (axis 0) become a new leading batch axis of ``_run`` (see ``_kernel``)."""
+    model, planner, q0, targets, t0s, hs = args
+    mb, pb, q0b, tb = in_batched[:4]
+    batch = statics["batch"]
+    if any(jax.tree_util.tree_leaves((mb.chain, in_batched[4:]))):  # mapped chain: plain vmap
+        axes = jax.tree_util.tree_map(lambda b: 0 if b else None, list(in_batched))
+        out = jax.vmap(partial(_run, **statics), in_axes=tuple(axes))(*args)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    def lift(x, b, core):
+        """(axis_size, *own batch, *core) -> (axis_size, 1, ..., 1, *own batch, *core)."""
+        if not b:
+            return x
+        return x.reshape(x.shape[:1] + (1,) * (len(batch) - (x.ndim - 1 - core)) + x.shape[1:])
+
+    model = replace(model, **{k: lift(getattr(model, k), getattr(mb, k), c)
+                              for k, c in (("W", 2), ("KJ", 2), ("q_rest", 1)) if getattr(model, k) is not None})
+    planner = jax.tree_util.tree_map(lambda x, b: lift(x, b, 0), planner, pb)
+    out = _kernel(**{**statics, "batch": (axis_size,) + batch})(
+        model, planner, lift(q0, q0b, 1), lift(targets, tb, 2), t0s, hs)
+    return out, Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
 
 
 def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4):
