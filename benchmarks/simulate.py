@@ -98,12 +98,14 @@ def capture_run(q0, xd, save):
         raise _Captured
 
     _simulate._run = fake
+    _simulate._kernel.cache_clear()  # kernels bind `_run` when built
     try:
         pj.simulate(model, planner, q0, xd, duration=bl.DURATION, dt=bl.DT, saveat=SAVES[save])
     except _Captured:
         pass
     finally:
         _simulate._run = orig
+        _simulate._kernel.cache_clear()
     return orig, box["args"], box["kwargs"]
 
 

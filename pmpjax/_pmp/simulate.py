@@ -201,7 +201,9 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         # tracing it (its jitted rate estimate would otherwise return tracers).
         with jax.ensure_compile_time_eval():
             _check_stability(model, planner, q0, batch, max(sched.hs))
-    kernel = _kernel(batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
+    # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
+    h = sched.hs[0] if len(set(sched.hs)) == 1 else None
+    kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
                      singular_tol=float(singular_tol), single=single)
     out = kernel(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs))
     return replace(out, t=jnp.asarray(sched.t))
@@ -279,8 +281,10 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 _BLOCK = 16
 
 
-@partial(jax.jit, static_argnames=("batch", "n_steps", "include_initial", "singular_tol", "single"))
-def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initial, singular_tol, single):
+@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single"))
+def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
+         single):
+    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
     n, m = chain.n, chain.m
     B = math.prod(batch)
@@ -295,6 +299,7 @@ def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initia
     # Saved: the start of every segment (the first unless `include_initial`) and the last end.
     S, offset = n_seg + include_initial, 1 - include_initial
     comps = (n, m, n, m, 1)
+    step_h = hs if h is None else h
 
     def field(t, qc, args):
         """``q̇`` and the saved observation ``(q, x, q̇, ẋ, manipulability)`` of ``(t, q)``."""
@@ -325,10 +330,10 @@ def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initia
             # written at row 0 (one sample at a time) and overwritten by segment 1's.
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
-            qc, acc = integrate_observed(field, qc, t0s, hs, n_steps, args, acc, wr, block=block)
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block)
         else:
-            qc, acc = integrate_observed(field, qc, t0s, hs, n_steps, args, acc, None)
-        obs = field(t0s[-1] + n_steps * hs[-1], qc, args)[1]  # the end state
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None)
+        obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
         return (qc, acc), None
 
