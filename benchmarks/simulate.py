@@ -29,7 +29,15 @@ with ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` and splits the batch
 devices, either by passing ``NamedSharding``-ed ``q0``/``target`` to ``simulate`` (GSPMD) or by
 ``jax.shard_map`` around ``simulate``; the faster is reported, both are in the JSON.
 
-Run: ``python benchmarks/simulate.py`` (≈ 4–8 min) or ``--quick`` (smoke run, writes nothing).
+Save modes (``--saves``, issue 13): the public ``simulate`` at B = 10 000 saving only the final
+state (the baseline of the ratios), every step (401 samples, 353 MB of output), every 10th step,
+at 40 given times, and a user's loss ∫|ẋ|² dt on the every-step trajectory, once as a jitted
+batched call and once as a jitted ``jax.vmap`` of single-movement calls. ``compile`` = first call
+minus a later call; ``page faults`` = minor faults per call (``getrusage``). Rows are interleaved
+so that they share the background load; the CPU column is less sensitive to it than wall time.
+
+Run: ``python benchmarks/simulate.py`` (≈ 4–8 min), ``--saves`` (save modes only, ≈ 3 min at
+load 1, 6 under load; ``--saves-B``), or ``--quick`` (smoke run, writes nothing).
 
 Results (2026-11-22 10:20 UTC, quiet machine, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, float64):
 
@@ -54,6 +62,53 @@ load 6–8 gave 134× SciPy and 0.61–1.3× C). At B = 10 000 one device runs 1
 steps/s (kernel 1.31×); pinned to one core 0.90×; split over the two cores 1.90×. SciPy does
 102 trajectories/s idle; JAX/SciPy = 125×. At B = 1 half of the 1.9 ms call is Python-side
 checks (kernel 1.0 ms). Saving every 10 steps costs 58 MB of XLA buffers instead of 6.5 MB.
+
+Save modes (``--saves``), 2026-12-02 00:33 UTC, same machine, heavily loaded (load average 9.1 →
+8.0 on 2 cores; absolute times ≈ 3× the quiet figures above, ratios are what to read):
+
+| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
+|---|---|---:|---:|---:|---:|---:|---:|
+| final | final | 15.6 | 3310 ms | 2589 ms | 1.21 M | 1.00, 1.00 | 0 k |
+| every step | every step | 12.9 | 5012 ms | 3372 ms | 798 k | 1.51, 1.30 | 90 k |
+| every 10 | every 10 | 14.9 | 2972 ms | 2518 ms | 1.35 M | 0.90, 0.97 | 0 k |
+| ts (40) | ts (40) | 15.7 | 3065 ms | 2510 ms | 1.3 M | 0.93, 0.97 | 0 k |
+| loss, batched call (jit) | every step | 10.5 | 3415 ms | 2540 ms | 1.17 M | 1.03, 0.98 | 18 k |
+| loss, vmap of single calls (jit) | every step | 12.1 | 3287 ms | 2629 ms | 1.22 M | 0.99, 1.02 | 18 k |
+
+Before (main at 08a433a, 2026-12-02 00:10 UTC, load 7.9 → 10.5, same script):
+
+| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
+|---|---|---:|---:|---:|---:|---:|---:|
+| final | final | 15.2 | 3405 ms | 2267 ms | 1.17 M | 1.00, 1.00 | 0 k |
+| every step | every step | 14.8 | 9587 ms | 6823 ms | 417 k | 2.82, 3.01 | 214 k |
+| every 10 | every 10 | 12.7 | 3814 ms | 2497 ms | 1.05 M | 1.12, 1.10 | 0 k |
+| ts (40) | ts (40) | 11.0 | 3717 ms | 2542 ms | 1.08 M | 1.09, 1.12 | 0 k |
+| loss, batched call (jit) | every step | 9.6 | 6761 ms | 5108 ms | 592 k | 1.99, 2.25 | 32 k |
+| loss, vmap of single calls (jit) | every step | 12.6 | 7454 ms | 5251 ms | 537 k | 2.19, 2.32 | 32 k |
+
+Where the time went (XLA per-op traces with ``jax.profiler``, HLO dumps, ``getrusage``):
+
+1. *A step size read per segment.* Saving every step makes every step its own segment, whose step
+   size ``hs[i]`` XLA fused, as a dynamic slice, into every elementwise loop of the RK4 stages:
+   the same ~60 fusions per step as the final-only loop ran 2.2× slower per element, at B = 100
+   as at 10 000 (so not memory). This was most of the cost, also for the jitted loss (2.0–2.3×
+   with the saved arrays never leaving the computation). Fix: equal step sizes (every mode, and
+   equally spaced ``ts``) are a compile-time constant.
+2. *Fresh memory.* Each new 353 MB array costs ≈ 86 k page faults, ≈ 0.45 s on this VM (a jitted
+   fill of fresh 353 MB: 0.45 s; a copy into touched memory: 0.07 s). The old path made four:
+   stacked (S, comp, B) scan outputs, the concatenated initial sample, the transpose to
+   (B, S, comp), and ``simulate``'s eager ``[..., 0, :, :]`` outside ``jit`` (214 k faults per
+   call). Fix: samples are written in place into the (B, M·S, comp) outputs (blocks of 16 steps
+   transposed at once, so that each write fills whole cache lines), the single-movement view is a
+   reshape inside ``jit``: one fresh output, 90 k faults. That output is the floor left in the
+   every-step row's wall time (1.51× wall, 1.30× CPU).
+3. *A fifth field evaluation per saved sample.* The saved ``q̇``, ``x`` come from RK4's first
+   stage of the next step (free); only ``ẋ = J q̇`` and the manipulability are added.
+4. *A user's ``vmap``.* Plain ``vmap`` put the mapped axis in front of the component-leading
+   state; a ``custom_vmap`` rule now folds it into the run's own trailing batch (equal results
+   to the bit, 0.99× the final-only call).
+
+First-call (compile) times are unchanged within the noise of the load (11–16 s here, 3–5 s quiet).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
