@@ -89,11 +89,13 @@ Before (main at 08a433a, 2026-12-02 00:10 UTC, load 7.9 → 10.5, same script):
 Where the time went (XLA per-op traces with ``jax.profiler``, HLO dumps, ``getrusage``):
 
 1. *A step size read per segment.* Saving every step makes every step its own segment, whose step
-   size ``hs[i]`` XLA fused, as a dynamic slice, into every elementwise loop of the RK4 stages:
-   the same ~60 fusions per step as the final-only loop ran 2.2× slower per element, at B = 100
-   as at 10 000 (so not memory). This was most of the cost, also for the jitted loss (2.0–2.3×
-   with the saved arrays never leaving the computation). Fix: equal step sizes (every mode, and
-   equally spaced ``ts``) are a compile-time constant.
+   size ``hs[i]`` is read at the loop index; XLA fused that read into the elementwise loops of
+   the RK4 stages (their HLO takes the loop index as an operand), and the same ~60 fusions per
+   step as the final-only loop ran 2.2× slower per element, at B = 100 as at 10 000 (so not
+   memory), even when saving only ``q``. This was most of the cost, also for the jitted loss
+   (2.0–2.3× with the saved arrays never leaving the computation). Fix: equal step sizes (every
+   mode, equally spaced ``ts``) are a compile-time constant; alone it took every-step saving from
+   2.3× to 1.26× the final-only CPU time in an A/B run.
 2. *Fresh memory.* Each new 353 MB array costs ≈ 86 k page faults, ≈ 0.45 s on this VM (a jitted
    fill of fresh 353 MB: 0.45 s; a copy into touched memory: 0.07 s). The old path made four:
    stacked (S, comp, B) scan outputs, the concatenated initial sample, the transpose to
