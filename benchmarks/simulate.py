@@ -29,7 +29,15 @@ with ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` and splits the batch
 devices, either by passing ``NamedSharding``-ed ``q0``/``target`` to ``simulate`` (GSPMD) or by
 ``jax.shard_map`` around ``simulate``; the faster is reported, both are in the JSON.
 
-Run: ``python benchmarks/simulate.py`` (≈ 4–8 min) or ``--quick`` (smoke run, writes nothing).
+Save modes (``--saves``, issue 13): the public ``simulate`` at B = 10 000 saving only the final
+state (the baseline of the ratios), every step (401 samples, 353 MB of output), every 10th step,
+at 40 given times, and a user's loss ∫|ẋ|² dt on the every-step trajectory, once as a jitted
+batched call and once as a jitted ``jax.vmap`` of single-movement calls. ``compile`` = first call
+minus a later call; ``page faults`` = minor faults per call (``getrusage``). Rows are interleaved
+so that they share the background load; the CPU column is less sensitive to it than wall time.
+
+Run: ``python benchmarks/simulate.py`` (≈ 4–8 min), ``--saves`` (save modes only, ≈ 3 min at
+load 1, 6 under load; ``--saves-B``), or ``--quick`` (smoke run, writes nothing).
 
 Results (2026-11-22 10:20 UTC, quiet machine, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, float64):
 
@@ -54,6 +62,55 @@ load 6–8 gave 134× SciPy and 0.61–1.3× C). At B = 10 000 one device runs 1
 steps/s (kernel 1.31×); pinned to one core 0.90×; split over the two cores 1.90×. SciPy does
 102 trajectories/s idle; JAX/SciPy = 125×. At B = 1 half of the 1.9 ms call is Python-side
 checks (kernel 1.0 ms). Saving every 10 steps costs 58 MB of XLA buffers instead of 6.5 MB.
+
+Save modes (``--saves``), 2026-12-02 00:33 UTC, same machine, heavily loaded (load average 9.1 →
+8.0 on 2 cores; absolute times ≈ 3× the quiet figures above, ratios are what to read):
+
+| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
+|---|---|---:|---:|---:|---:|---:|---:|
+| final | final | 15.6 | 3310 ms | 2589 ms | 1.21 M | 1.00, 1.00 | 0 k |
+| every step | every step | 12.9 | 5012 ms | 3372 ms | 798 k | 1.51, 1.30 | 90 k |
+| every 10 | every 10 | 14.9 | 2972 ms | 2518 ms | 1.35 M | 0.90, 0.97 | 0 k |
+| ts (40) | ts (40) | 15.7 | 3065 ms | 2510 ms | 1.3 M | 0.93, 0.97 | 0 k |
+| loss, batched call (jit) | every step | 10.5 | 3415 ms | 2540 ms | 1.17 M | 1.03, 0.98 | 18 k |
+| loss, vmap of single calls (jit) | every step | 12.1 | 3287 ms | 2629 ms | 1.22 M | 0.99, 1.02 | 18 k |
+
+Before (main at 08a433a, 2026-12-02 00:10 UTC, load 7.9 → 10.5, same script):
+
+| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
+|---|---|---:|---:|---:|---:|---:|---:|
+| final | final | 15.2 | 3405 ms | 2267 ms | 1.17 M | 1.00, 1.00 | 0 k |
+| every step | every step | 14.8 | 9587 ms | 6823 ms | 417 k | 2.82, 3.01 | 214 k |
+| every 10 | every 10 | 12.7 | 3814 ms | 2497 ms | 1.05 M | 1.12, 1.10 | 0 k |
+| ts (40) | ts (40) | 11.0 | 3717 ms | 2542 ms | 1.08 M | 1.09, 1.12 | 0 k |
+| loss, batched call (jit) | every step | 9.6 | 6761 ms | 5108 ms | 592 k | 1.99, 2.25 | 32 k |
+| loss, vmap of single calls (jit) | every step | 12.6 | 7454 ms | 5251 ms | 537 k | 2.19, 2.32 | 32 k |
+
+Where the time went (XLA per-op traces with ``jax.profiler``, HLO dumps, ``getrusage``):
+
+1. *A step size read per segment.* Saving every step makes every step its own segment, whose step
+   size ``hs[i]`` is read at the loop index; XLA fused that read into the elementwise loops of
+   the RK4 stages (their HLO takes the loop index as an operand), and the same ~60 fusions per
+   step as the final-only loop ran 2.2× slower per element, at B = 100 as at 10 000 (so not
+   memory), even when saving only ``q``. This was most of the cost, also for the jitted loss
+   (2.0–2.3× with the saved arrays never leaving the computation). Fix: equal step sizes (every
+   mode, equally spaced ``ts``) are a compile-time constant; alone it took every-step saving from
+   2.3× to 1.26× the final-only CPU time in an A/B run.
+2. *Fresh memory.* Each new 353 MB array costs ≈ 86 k page faults, ≈ 0.45 s on this VM (a jitted
+   fill of fresh 353 MB: 0.45 s; a copy into touched memory: 0.07 s). The old path made four:
+   stacked (S, comp, B) scan outputs, the concatenated initial sample, the transpose to
+   (B, S, comp), and ``simulate``'s eager ``[..., 0, :, :]`` outside ``jit`` (214 k faults per
+   call). Fix: samples are written in place into the (B, M·S, comp) outputs (blocks of 16 steps
+   transposed at once, so that each write fills whole cache lines), the single-movement view is a
+   reshape inside ``jit``: one fresh output, 90 k faults. That output is the floor left in the
+   every-step row's wall time (1.51× wall, 1.30× CPU).
+3. *A fifth field evaluation per saved sample.* The saved ``q̇``, ``x`` come from RK4's first
+   stage of the next step (free); only ``ẋ = J q̇`` and the manipulability are added.
+4. *A user's ``vmap``.* Plain ``vmap`` put the mapped axis in front of the component-leading
+   state; a ``custom_vmap`` rule now folds it into the run's own trailing batch (equal results
+   to the bit, 0.99× the final-only call).
+
+First-call (compile) times are unchanged within the noise of the load (11–16 s here, 3–5 s quiet).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
@@ -78,7 +135,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import pmpjax as pj  # noqa: E402
-from pmpjax import _simulate  # noqa: E402
+from pmpjax._pmp import simulate as _simulate  # noqa: E402
 
 SAVES = {"final": pj.SaveAt(final=True), "every10": pj.SaveAt(every=10)}
 
@@ -98,12 +155,14 @@ def capture_run(q0, xd, save):
         raise _Captured
 
     _simulate._run = fake
+    _simulate._kernel.cache_clear()  # kernels bind `_run` when built
     try:
         pj.simulate(model, planner, q0, xd, duration=bl.DURATION, dt=bl.DT, saveat=SAVES[save])
     except _Captured:
         pass
     finally:
         _simulate._run = orig
+        _simulate._kernel.cache_clear()
     return orig, box["args"], box["kwargs"]
 
 
@@ -374,9 +433,100 @@ def render(res, big):
     return "\n".join(L)
 
 
+# ----------------------------------------------------------------------------------------------
+# --saves: what saving costs (issue 13)
+
+SAVE_MODES = {"final": pj.SaveAt(final=True), "every step": pj.SaveAt(), "every 10": pj.SaveAt(every=10),
+              "ts (40)": pj.SaveAt(ts=tuple(float(v) for v in np.arange(1, 41) * 0.01))}
+
+
+def _effort(tr):
+    """A user's loss on the saved trajectory: ∫|ẋ|² dt per movement (rectangle rule)."""
+    return jax.numpy.sum(tr.speed**2, axis=-1) * bl.DT
+
+
+def save_calls(B):
+    """``{row: (save, call)}``: batched public calls per save mode, and a loss on the every-step
+    trajectory either batched or as a user's ``jax.vmap`` over single calls."""
+    model, planner = bl.jax_problem()
+    q0, xd = jax.numpy.asarray(bl.start_postures(B)), jax.numpy.asarray(bl.targets(B))
+    sim = lambda q, x, sv: pj.simulate(model, planner, q, x, duration=bl.DURATION, dt=bl.DT, saveat=sv)  # noqa: E731
+    calls = {k: (k, lambda sv=sv: jax.block_until_ready(sim(q0, xd, sv))) for k, sv in SAVE_MODES.items()}
+    batched = jax.jit(lambda q, x: _effort(sim(q, x, pj.SaveAt())))
+    vmapped = jax.jit(jax.vmap(lambda q, x: _effort(sim(q, x, pj.SaveAt()))))
+    calls["loss, batched call (jit)"] = ("every step", lambda: jax.block_until_ready(batched(q0, xd)))
+    calls["loss, vmap of single calls (jit)"] = ("every step", lambda: jax.block_until_ready(vmapped(q0, xd)))
+    return calls
+
+
+def _usage():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime, r.ru_minflt
+
+
+def bench_saves(B, repeats):
+    """Per row: first call (trace + compile + run) [s], then the minimum wall and CPU time and
+    minor page faults per call over ``repeats`` rounds interleaved across rows (same load)."""
+    calls = save_calls(B)
+    res = {k: {"save": sv} for k, (sv, _) in calls.items()}
+    outs = {}
+    for k, (_, call) in calls.items():
+        t0 = time.perf_counter()
+        outs[k] = call()
+        res[k]["first_call_s"] = time.perf_counter() - t0
+        print(f"  {k}: first call {res[k]['first_call_s']:.1f} s", flush=True)
+    vals = {k: np.asarray(o) for k, o in outs.items() if k.startswith("loss")}
+    del outs
+    for _ in range(repeats):
+        for k, (_, call) in calls.items():
+            (c0, f0), t0 = _usage(), time.perf_counter()
+            out = call()
+            t = time.perf_counter() - t0
+            c1, f1 = _usage()
+            del out
+            r = res[k]
+            r["s"], r["cpu_s"] = min(r.get("s", np.inf), t), min(r.get("cpu_s", np.inf), c1 - c0)
+            r["minflt"] = min(r.get("minflt", np.inf), f1 - f0)
+    for r in res.values():
+        r["compile_s"] = r["first_call_s"] - r["s"]
+        r["steps_per_s"] = B * bl.N_STEPS / r["s"]
+        r["vs_final"], r["cpu_vs_final"] = r["s"] / res["final"]["s"], r["cpu_s"] / res["final"]["cpu_s"]
+    diff = float(np.max(np.abs(vals["loss, vmap of single calls (jit)"] - vals["loss, batched call (jit)"])))
+    return res, diff
+
+
+def main_saves(B, repeats, out):
+    load0 = os.getloadavg()
+    print(f"pmpjax simulate save modes — B = {B}, {bl.machine()}, jax {jax.__version__}, load {load0[0]:.2f}",
+          flush=True)
+    rows, diff = bench_saves(B, repeats)
+    res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": bl.machine(),
+           "jax": jax.__version__, "B": B, "pmpjax": os.path.dirname(pj.__file__), "rows": rows,
+           "max_abs_diff_vmap_vs_batched_loss": diff, "load_avg_start": load0, "load_avg_end": os.getloadavg()}
+    L = [f"| what (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |",
+         "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for k, r in rows.items():
+        L.append(f"| {k} | {r['save']} | {r['compile_s']:.1f} | {r['s'] * 1e3:.0f} ms | {r['cpu_s'] * 1e3:.0f} ms | "
+                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {r['minflt'] / 1e3:.0f} k |")
+    L.append(f"\nvmap-of-single-calls loss vs batched loss: max |Δ| = {diff:.1e}. "
+             f"Load average {load0[0]:.1f} → {res['load_avg_end'][0]:.1f}.")
+    print("\n" + "\n".join(L))
+    if out == "default":
+        print(f"wrote {bl.write_results('simulate_saves', res)}")
+    elif out:
+        with open(out, "w") as f:
+            json.dump(res, f, indent=1)
+        print(f"wrote {out}")
+    return res
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small smoke run; writes no JSON")
+    ap.add_argument("--saves", action="store_true",
+                    help="only the save-mode rows (every step, every 10, ts, final, vmap of a user's call)")
+    ap.add_argument("--saves-B", type=int, default=10_000, help="batch size of --saves (default 10000)")
+    ap.add_argument("--saves-out", help="JSON path of --saves (default results/simulate_saves.json)")
     ap.add_argument("--worker", choices=["memory", "pinned", "sharded"], help=argparse.SUPPRESS)
     ap.add_argument("--B", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--save", default="final", help=argparse.SUPPRESS)
@@ -388,5 +538,8 @@ if __name__ == "__main__":
         print(json.dumps(worker_pinned(a.B, 3)))
     elif a.worker == "sharded":
         print(json.dumps(worker_sharded(a.B, 3, a.out)))
+    elif a.saves:
+        main_saves(1000 if a.quick else a.saves_B, 2 if a.quick else 3,
+                   a.saves_out or (None if a.quick else "default"))
     else:
         main(a.quick)

@@ -136,15 +136,46 @@ def test_batch_equals_single_runs(rng):
     np.testing.assert_allclose(vm[0], pj.simulate(lam0(), planner, q0[0], targets[0], **kw).q, atol=1e-13)
 
 
-def test_saveat_given_times_and_final():
-    planner = ARIMOTO
-    full = pj.simulate(lam0(), planner, QREST_S2, TG["W"], **KW)
-    ts = (0.0, 0.1, 0.25, 0.4)
-    at = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(ts=ts))
-    idx = [int(round(t / 0.01)) for t in ts]
-    np.testing.assert_allclose(at.q, np.asarray(full.q)[idx], atol=1e-9)
-    fin = pj.simulate(lam0(), planner, QREST_S2, TG["W"], duration=0.4, dt=1e-3, saveat=pj.SaveAt(final=True))
-    np.testing.assert_allclose(fin.q[-1], full.q[-1], atol=1e-13)
+FIELDS = ("q", "x", "qdot", "xdot", "manipulability")
+
+
+def test_save_modes_agree_at_shared_steps():
+    """Every step, every 10th (KW), given times without t = 0, and final-only save the same states.
+
+    Catches samples written at the wrong row (block writes, the overwritten unsaved start of
+    ``ts``), derived outputs of the wrong state or time, and a wrong status; the derived outputs
+    are checked against NumPy (x = fk(q), ẋ = J q̇, manipulability = sqrt(det J Jᵀ)).
+    """
+    planner, model = ARIMOTO, lam0()
+    q0 = np.stack([QREST_S2, [0.0, np.pi / 2 - 1e-6, 0.0]])  # the second starts singular
+    tg = np.stack([TG["W"], TG["C"]])
+    run = lambda sv: pj.simulate(model, planner, q0, tg, duration=0.4, dt=1e-3, saveat=sv)  # noqa: E731
+    every = run(pj.SaveAt())
+    tenth = run(KW["saveat"])
+    assert every.q.shape == (2, 401, 3) and tenth.q.shape == (2, 41, 3)
+    np.testing.assert_allclose(every.t, np.arange(401) * 1e-3, atol=1e-15)
+    for f in FIELDS:
+        np.testing.assert_allclose(getattr(tenth, f), getattr(every, f)[:, ::10], rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(every.status, [pj.Status.SUCCESSFUL, pj.Status.SINGULAR])
+    np.testing.assert_array_equal(tenth.status, every.status)
+    q, qd = np.asarray(every.q[0]), np.asarray(every.qdot[0])
+    J = np.stack([wrist_jac(v) for v in q])
+    np.testing.assert_allclose(every.x[0], np.stack([wrist_fk(v) for v in q]), atol=1e-14)
+    np.testing.assert_allclose(every.xdot[0], np.einsum("sij,sj->si", J, qd), atol=1e-13)
+    np.testing.assert_allclose(every.manipulability[0], np.sqrt(np.linalg.det(J @ J.transpose(0, 2, 1))),
+                               atol=1e-13)
+    ts = (0.1, 0.2, 0.3, 0.4)  # on the 1 ms grid, without t = 0
+    at = run(pj.SaveAt(ts=ts))
+    np.testing.assert_allclose(at.t, ts)
+    for f in FIELDS:
+        np.testing.assert_allclose(getattr(at, f), getattr(every, f)[:, 100::100], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(at.status, every.status)
+    fin = run(pj.SaveAt(final=True))
+    assert fin.q.shape == (2, 1, 3)
+    for f in FIELDS:
+        np.testing.assert_allclose(getattr(fin, f), getattr(every, f)[:, -1:], rtol=0, atol=1e-13)
+    # the status looks at saved samples only: the final posture is regular
+    np.testing.assert_array_equal(fin.status, [pj.Status.SUCCESSFUL, pj.Status.SUCCESSFUL])
 
 
 def test_eq10_gain_against_numpy():

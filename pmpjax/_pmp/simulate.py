@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 from .._base.linalg import det, mm, mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
 from .._base.validate import as_array, check_positive_int, is_concrete
-from .integrate import integrate
+from .integrate import integrate_observed
 from .models import _PMP
 from .planners import Planner
 from .redundancy import admittance_terms_soa
@@ -170,7 +172,15 @@ def simulate_sequence(
     ``targets`` and of the model's and planner's parameters broadcast together as a batch.
     Returns a :class:`Trajectory` with leaves (..., M, S, ·). Differentiable with respect to every
     array leaf and to ``q0``/``targets``; ``duration``, ``dt`` and ``saveat`` are static.
+
+    Saved samples come from RK4's first stage (no extra field evaluations when saving every step)
+    and are written in place in the output layout, so saving costs about the memory it fills
+    (``benchmarks/simulate.py --saves``).
     """
+    return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False)
+
+
+def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, single):
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     if not isinstance(planner, Planner):
@@ -191,10 +201,67 @@ def simulate_sequence(
         # tracing it (its jitted rate estimate would otherwise return tracers).
         with jax.ensure_compile_time_eval():
             _check_stability(model, planner, q0, batch, max(sched.hs))
-    out = _run(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs),
-               batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
-               singular_tol=float(singular_tol))
+    # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
+    h = sched.hs[0] if len(set(sched.hs)) == 1 else None
+    kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
+                     singular_tol=float(singular_tol), single=single)
+    out = kernel(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs))
     return replace(out, t=jnp.asarray(sched.t))
+
+
+@functools.lru_cache(maxsize=256)
+def _kernel(**statics):
+    """``_run`` with these static arguments, batched efficiently under a caller's ``jax.vmap``.
+
+    Plain ``vmap`` of ``_run`` adds the mapped axis in front of the component-leading state, so
+    every stage reads strided component slices and writes one trajectory at a time. The
+    ``custom_vmap`` rule instead folds the mapped axis into the run's own (trailing, contiguous)
+    batch. ``custom_vmap`` has no derivative rules, so derivatives go through ``custom_jvp`` with
+    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``).
+    """
+    run = partial(_run, **statics)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return run(*args)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        return _vmap_rule(statics, axis_size, in_batched, args)
+
+    @jax.custom_jvp
+    def kernel(*args):
+        return batched(*args)
+
+    @kernel.defjvp
+    def _jvp(primals, tangents):
+        return jax.jvp(run, primals, tangents)
+
+    return kernel
+
+
+def _vmap_rule(statics, axis_size, in_batched, args):
+    """Mapped leaves (axis 0) become a new leading batch axis of ``_run`` (see ``_kernel``)."""
+    model, planner, q0, targets, t0s, hs = args
+    mb, pb, q0b, tb = in_batched[:4]
+    batch = statics["batch"]
+    if any(jax.tree_util.tree_leaves((mb.chain, in_batched[4:]))):  # mapped chain: plain vmap
+        axes = jax.tree_util.tree_map(lambda b: 0 if b else None, list(in_batched))
+        out = jax.vmap(partial(_run, **statics), in_axes=tuple(axes))(*args)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    def lift(x, b, core):
+        """(axis_size, *own batch, *core) -> (axis_size, 1, ..., 1, *own batch, *core)."""
+        if not b:
+            return x
+        return x.reshape(x.shape[:1] + (1,) * (len(batch) - (x.ndim - 1 - core)) + x.shape[1:])
+
+    model = replace(model, **{k: lift(getattr(model, k), getattr(mb, k), c)
+                              for k, c in (("W", 2), ("KJ", 2), ("q_rest", 1)) if getattr(model, k) is not None})
+    planner = jax.tree_util.tree_map(lambda x, b: lift(x, b, 0), planner, pb)
+    out = _kernel(**{**statics, "batch": (axis_size,) + batch})(
+        model, planner, lift(q0, q0b, 1), lift(targets, tb, 2), t0s, hs)
+    return out, Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
 
 
 def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4):
@@ -205,17 +272,21 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
-    traj = simulate_sequence(model, planner, q0, jnp.asarray(target)[..., None, :], duration=duration,
-                             dt=dt, saveat=saveat, singular_tol=singular_tol)
-    return replace(
-        traj, q=traj.q[..., 0, :, :], x=traj.x[..., 0, :, :], qdot=traj.qdot[..., 0, :, :],
-        xdot=traj.xdot[..., 0, :, :], manipulability=traj.manipulability[..., 0, :],
-    )
+    return _simulate(model, planner, q0, jnp.asarray(target)[..., None, :], duration, dt, saveat,
+                     singular_tol, True)
 
 
-@partial(jax.jit, static_argnames=("batch", "n_steps", "include_initial", "singular_tol"))
-def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initial, singular_tol):
+#: Most consecutive samples written to the trajectory-major outputs at once: one sample per
+#: trajectory touches a cache line per trajectory, a block of 16 fills whole lines.
+_BLOCK = 16
+
+
+@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single"))
+def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
+         single):
+    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
+    n, m = chain.n, chain.m
     B = math.prod(batch)
     core = {"W": 2, "KJ": 2, "q_rest": 1}
     model = replace(model, **{k: _flat(getattr(model, k), batch, c) for k, c in core.items()
@@ -224,38 +295,54 @@ def _run(model, planner, q0, targets, t0s, hs, *, batch, n_steps, include_initia
     planner = planner.to_soa(batch)
     q = to_soa(_flat(q0, batch, 1))
     tg = jnp.moveaxis(_flat(targets, batch, 2), 0, -1)  # (M, m, B)
+    n_mov, n_seg = tg.shape[0], t0s.shape[0]
+    # Saved: the start of every segment (the first unless `include_initial`) and the last end.
+    S, offset = n_seg + include_initial, 1 - include_initial
+    comps = (n, m, n, m, 1)
+    step_h = hs if h is None else h
 
     def field(t, qc, args):
-        pl, target = args
-        x, J = chain.fk_jac_soa(qc)
-        P, M = admittance_terms_soa(J, consts["A"])
-        return model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
-
-    def save(t, qc, args):
+        """``q̇`` and the saved observation ``(q, x, q̇, ẋ, manipulability)`` of ``(t, q)``."""
         pl, target = args
         x, J = chain.fk_jac_soa(qc)
         P, M = admittance_terms_soa(J, consts["A"])
         qd = model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
         w = jnp.sqrt(jnp.maximum(det(mm(J, jnp.swapaxes(J, 0, 1))), 0.0))
-        return qc, x, qd, mv(J, qd), w
+        return qd, (qc, x, qd, mv(J, qd), w[None])
 
-    def movement(qc, target):
+    def write(acc, j, obs, valid):
+        """Samples ``obs`` (K, comp, B) into rows ``j, ..., j + K − 1`` of the (B, M·S, comp) outputs."""
+        bufs, fin, wmin = acc
+        bufs = tuple(lax.dynamic_update_slice_in_dim(b, jnp.moveaxis(o, -1, 0), j, axis=1)
+                     for b, o in zip(bufs, obs))
+        w = lax.stop_gradient(obs[4][:, 0])
+        fin = fin & (jnp.logical_not(valid) | jnp.all(jnp.isfinite(obs[0]), axis=(0, 1)))
+        wmin = jnp.where(valid, jnp.minimum(wmin, jnp.min(jnp.where(jnp.isfinite(w), w, 0.0), axis=0)), wmin)
+        return bufs, fin, wmin
+
+    def movement(carry, inp):
+        qc, acc = carry
+        k, target = inp
         _, J0 = chain.fk_jac_soa(qc)
-        pl = planner.start(admittance_terms_soa(J0, consts["A"])[1])
-        qT, saved = integrate(field, qc, t0s, hs, n_steps, (pl, target), save)
-        if include_initial:
-            s0 = save(jnp.zeros(()), qc, (pl, target))
-            saved = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), s0, saved)
-        return qT, saved
+        args = (planner.start(admittance_terms_soa(J0, consts["A"])[1]), target)
+        if n_seg > 1 or include_initial:  # segment starts are saved
+            # Without `include_initial` segment i's start is row i − 1; segment 0's start is
+            # written at row 0 (one sample at a time) and overwritten by segment 1's.
+            block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
+            wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block)
+        else:
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None)
+        obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
+        acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
+        return (qc, acc), None
 
-    qT, (qs, xs, qds, xds, ws) = jax.lax.scan(movement, q, tg)
-    # (M, S, comp, B) -> (*batch, M, S, comp)
-    back = lambda a: jnp.moveaxis(a, -1, 0).reshape(batch + a.shape[:-1])  # noqa: E731
-    fin = jnp.all(jnp.isfinite(qs), axis=(0, 1, 2)) & jnp.all(jnp.isfinite(qT), axis=0)
-    sing = jnp.min(jnp.where(jnp.isfinite(ws), ws, 0.0), axis=(0, 1)) < singular_tol
-    status = jnp.where(~fin, int(NONFINITE), jnp.where(sing, int(SINGULAR), int(OK))).reshape(batch)
-    return Trajectory(
-        t=t0s, q=back(qs), x=back(xs), qdot=back(qds), xdot=back(xds),
-        manipulability=jnp.moveaxis(ws, -1, 0).reshape(batch + ws.shape[:-1]), status=status,
-    )
-
+    bufs = tuple(jnp.zeros((B, n_mov * S, c), q.dtype) for c in comps)
+    acc = (bufs, jnp.ones((B,), bool), jnp.full((B,), jnp.inf, q.dtype))
+    (qT, (bufs, fin, wmin)), _ = lax.scan(movement, (q, acc), (jnp.arange(n_mov), tg))
+    fin = fin & jnp.all(jnp.isfinite(qT), axis=0)
+    status = jnp.where(~fin, int(NONFINITE), jnp.where(wmin < singular_tol, int(SINGULAR), int(OK)))
+    lead = batch if single else batch + (n_mov,)
+    q_, x_, qd_, xd_, w_ = (b.reshape(lead + (S, c)) for b, c in zip(bufs, comps))
+    return Trajectory(t=t0s, q=q_, x=x_, qdot=qd_, xdot=xd_, manipulability=w_[..., 0],
+                      status=status.reshape(batch))
