@@ -33,7 +33,6 @@ Latest figures: (filled in below after the run)
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -43,6 +42,8 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
+import scipy.integrate  # noqa: E402
+import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
 from _baselines import write_results  # noqa: E402
@@ -51,7 +52,7 @@ import fitting  # noqa: E402
 from fitting import _reaching as R  # noqa: E402
 
 SUBJECTS = (1, 2, 3, 4)
-VARIANTS = (("lambda0", "tau0_KJ", "tied"), ("lambda0", "diagonal", "tied"), ("lambda0", "full", "tied"))
+VARIANTS = (("lambda0", "tau0_KJ", "tied"), ("lambda0", "full", "tied"), ("lambda0", "diagonal", "tied"))
 FITTED = (("lambda0", "tau0_KJ", "fitted"), ("lambda0", "diagonal", "fitted"), ("lambda0", "full", "fitted"))
 
 
@@ -61,6 +62,82 @@ def load():
 
 def log(msg):
     print(f"[{time.strftime('%H:%M:%S')} load {load():.1f}] {msg}", flush=True)
+
+
+# --- SciPy loop: an independent NumPy λ0-PMP of the arm on normalised time ----------------------
+
+L1, L2 = 0.30, 0.33  # data README (pmpjax.ShoulderElbowArm defaults)
+
+
+def _rot(axis, t):
+    c, s = np.cos(t), np.sin(t)
+    R = {0: [[1, 0, 0], [0, c, -s], [0, s, c]], 1: [[c, 0, s], [0, 1, 0], [-s, 0, c]],
+         2: [[c, -s, 0], [s, c, 0], [0, 0, 1]]}[axis]
+    dR = {0: [[0, 0, 0], [0, -s, -c], [0, c, -s]], 1: [[-s, 0, c], [0, 0, 0], [-c, 0, -s]],
+          2: [[-s, -c, 0], [c, -s, 0], [0, 0, 0]]}[axis]
+    return np.array(R, float), np.array(dR, float)
+
+
+def arm(q):
+    """Hand position (3,) and Jacobian (3, 4) of ``p = Rx(q1) Ry(q2) Rz(−q3) ([0,0,−L1] +
+    Ry(−q4) [0,0,−L2])`` (the data README's formula, derivatives by the product rule)."""
+    (A, dA), (B, dB), (C, dC), (D, dD) = _rot(0, q[0]), _rot(1, q[1]), _rot(2, -q[2]), _rot(1, -q[3])
+    u = np.array([0.0, 0.0, -L2])
+    v = np.array([0.0, 0.0, -L1]) + D @ u
+    BCv = B @ (C @ v)
+    J = np.stack([dA @ BCv, A @ (dB @ (C @ v)), -(A @ (B @ (dC @ v))), -(A @ (B @ (C @ (dD @ u))))], 1)
+    return A @ BCv, J
+
+
+def stiffness_np(s):
+    """``4 expm(S)/tr expm(S)`` with S traceless symmetric: diagonal s0..s2, then the upper triangle."""
+    import scipy.linalg
+
+    S = np.zeros((4, 4))
+    S[[0, 1, 2], [0, 1, 2]] = s[:3]
+    S[3, 3] = -np.sum(s[:3])
+    iu = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    for k, (i, j) in enumerate(iu):
+        S[i, j] = S[j, i] = s[3 + k]
+    E = scipy.linalg.expm(S)
+    return 4.0 * E / np.trace(E)
+
+
+def movement_np(q0, target, KJ, q_rest, tau, tau0, n=50):
+    """λ0-PMP (``W = τ0 KJ``, Arimoto with Eq 10 gain) on normalised time s ∈ [0, 1]: q at n samples."""
+    A = np.linalg.inv(tau0 * KJ)
+    _, J0 = arm(q0)
+    k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)
+
+    def rhs(t, q):
+        x, J = arm(q)
+        s = t / tau
+        F = k * (1.0 - (1.0 + s) * np.exp(-s)) * (target - x)
+        tel = KJ @ (q - q_rest)
+        JA = J @ A
+        lam0 = np.linalg.solve(JA @ J.T, JA @ tel)
+        return A @ (J.T @ (F + lam0) - tel)
+
+    s = np.linspace(0.0, 1.0, n)
+    sol = scipy.integrate.solve_ivp(rhs, (0.0, 1.0), q0, method="LSODA", t_eval=s, rtol=1e-6, atol=1e-9)
+    if not sol.success or sol.y.shape[1] != n:
+        return np.full((n, 4), np.nan)
+    return sol.y.T
+
+
+def residual_np(theta, q_obs, t_ratio, elbow):
+    """The fit's stage-2 residual (``W = τ0 KJ``, ``τ = τ0 = T/5``): per motion
+    ``(q − q_obs)(s_k)/√49``, k = 1..49, then ``(q − q_obs)(1)`` [rad]."""
+    KJ = stiffness_np(theta[:9])
+    q_rest = np.append(theta[9:12], elbow)
+    out = []
+    for qo, tr in zip(q_obs, t_ratio):
+        x_d, _ = arm(qo[-1])
+        q = movement_np(qo[0], x_d, KJ, q_rest, 0.2 * tr, 0.2 * tr, qo.shape[0])
+        d = q - qo
+        out += [d[1:].ravel() / np.sqrt(qo.shape[0] - 1), d[-1]]
+    r = np.concatenate(out)
+    return np.where(np.isfinite(r), r, 1e3)
 
 
 # --- compile time from jax.monitoring ------------------------------------------------------------
@@ -217,6 +294,13 @@ def table(args):
         res["fits"][key]["predict_s"] = time.perf_counter() - t
         preds[key] = pred
         res["predictors"][key] = predictor_rows(pred, "model")
+        if key == "lambda0/tau0_KJ/tied" and not args.no_scipy:
+            try:
+                scipy_compare(args, fit, wall, comp, subjects, kw)
+            except Exception:  # the table goes on
+                import traceback
+
+                traceback.print_exc()
         if len(preds) == 1:
             for b in R.BASELINES:
                 res["predictors"][b] = predictor_rows(pred, b)
@@ -225,8 +309,9 @@ def table(args):
             res["wilcoxon"][f"{damping} vs tau0_KJ ({tc})"] = wilcoxon(preds[ref], pred)
         log(f"  held-out RMSE all: {res['predictors'][key]['all']['rmse']}")
         # baselines last in the table
-        res["predictors"] = {k: res["predictors"][k] for k in
-                             sorted(res["predictors"], key=lambda k: (k in R.BASELINES, list(res['predictors']).index(k)))}
+        order = list(res["predictors"])
+        res["predictors"] = {k: res["predictors"][k] for k in sorted(order, key=lambda k: (k in R.BASELINES,
+                                                                                            order.index(k)))}
         res["load_end"] = load()
         md = markdown(res)
         if not args.quick:
@@ -238,18 +323,106 @@ def table(args):
     return res
 
 
+class _Cap(Exception):
+    pass
+
+
+def fit_cost(args):
+    subjects, kw = SUBJECTS, dict(max_steps=tuple(args.max_steps))
+    if args.quick:
+        subjects, kw = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2))
+    log(f"fit_reaching({list(subjects)}) default model ...")
+    fit, wall, comp = timed_fit(subjects, **kw)
+    log(f"  {wall:.0f} s wall, {comp:.0f} s compile, status {fit.status.tolist()}, lm {fit.lm_steps.tolist()}")
+    return scipy_compare(args, fit, wall, comp, subjects, kw)
+
+
+def scipy_compare(args, fit, wall, comp, subjects, kw):
+    """The SciPy loop on one subject against the JAX fit ``fit`` (default model) of ``subjects``."""
+    nfev = 2 if args.quick else args.scipy_nfev
+    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(),
+               machine="2-core AMD EPYC Zen 4 KVM, no GPU", options={k: list(v) for k, v in kw.items()})
+    S = len(subjects)
+    res["jax"] = dict(wall_s=wall, compile_s=comp, run_s=wall - comp, run_s_per_subject=(wall - comp) / S,
+                      load=load(), status=fit.status.tolist(), lm_steps=fit.lm_steps.tolist(),
+                      n_motions=fit.n_motions.tolist(), loss=fit.loss.tolist(), steps_per_sample=fit.steps_per_sample,
+                      compile_method="union of jax.monitoring trace/lower/compile time spans inside the call")
+
+    # the same stage-1 start as the fit (same shapes and options: a compilation-cache hit)
+    reps, tasks = fit.reps, fit.tasks
+    ms = [R._motions(s, None, reps, tasks) for s in subjects]
+    cfg = R._Config(fit.model, fit.damping, fit.time_constants, 5)  # fit_reaching's default steps_per_sample
+    q_obs, t_ratio, weight = R._stack_motions(ms)
+    elbow = np.stack([m.q_obs[:, -1, 3].mean() for m in ms])
+    th1 = np.concatenate([np.zeros((S, R._N_K)), np.stack([m.q_obs[:, -1, :3].mean(0) for m in ms])], -1)
+    s1 = jax.device_get(R._stage1_batch(th1, q_obs, t_ratio, weight, elbow, np.int32(kw["max_steps"][0]),
+                                        cfg=cfg))
+
+    k = int(np.argmin([len(m) for m in ms]))  # the subject with the fewest motions
+    m = ms[k]
+    p = len(fit.param_names)
+    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}), capped at {nfev} residual evaluations ...")
+    calls, costs = [], []
+
+    def fun(theta):
+        if len(calls) >= nfev:
+            raise _Cap
+        t = time.perf_counter()
+        r = residual_np(theta, m.q_obs, m.t_ratio, elbow[k])
+        calls.append(time.perf_counter() - t)
+        costs.append(0.5 * float(r @ r))
+        return r
+
+    t = time.perf_counter()
+    try:  # capped at nfev residual calls: the start and the first Jacobian columns
+        scipy.optimize.least_squares(fun, s1["start"][k], method="lm", xtol=1e-8, ftol=1e-8)
+    except _Cap:
+        pass
+    t_sp = time.perf_counter() - t
+    fun(fit.params[k])  # the same residual at the JAX optimum
+    c_opt = costs[-1]
+    per_eval = float(np.median(calls))
+    it = int(fit.lm_steps[k][1])
+    extrap = per_eval * (p + 1) * max(it, 1)
+    jax_subject = (wall - comp) / S
+    res["scipy"] = dict(
+        subject=m.subject, n_motions=len(m), p=p, max_nfev=nfev, residual_calls=len(calls), seconds=t_sp,
+        seconds_per_residual=per_eval, start_cost=costs[0],
+        jax_final_cost=float(fit.loss[k]),
+        numpy_cost_at_jax_optimum=c_opt, rel_cost_diff_at_jax_optimum=abs(c_opt / float(fit.loss[k]) - 1),
+        jax_lm_iterations=it, extrapolated_seconds=extrap, load=load(),
+        integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9", optimiser="least_squares lm, 2-point Jacobian")
+    res["ratios"] = {"scipy_subject_vs_jax_subject_run": extrap / jax_subject,
+                     "scipy_subject_vs_jax_subject_incl_compile": extrap / (wall / S)}
+    res["load_end"] = load()
+    log(f"  SciPy {per_eval:.1f} s per residual ({len(calls)} calls); cost at the stage-1 start "
+        f"{costs[0]:.5g}; JAX final "
+        f"{fit.loss[k]:.5g}, NumPy at the JAX optimum {c_opt:.5g}")
+    print(f"\n| | compile [s] | run [s] | per subject [s] | load |\n|---|---:|---:|---:|---:|\n"
+          f"| JAX fit_reaching, {S} subjects | {comp:.0f} | {wall - comp:.0f} | {jax_subject:.0f} | "
+          f"{res['jax']['load']:.1f} |\n| SciPy loop, {m.subject} (extrapolated: {per_eval:.1f} s x {p + 1} x "
+          f"{it} iterations) | — | — | {extrap:.0f} | {res['scipy']['load']:.1f} |\n")
+    print(f"ratio SciPy / JAX per subject: {res['ratios']['scipy_subject_vs_jax_subject_run']:.0f}x (run), "
+          f"{res['ratios']['scipy_subject_vs_jax_subject_incl_compile']:.0f}x (compile included)")
+    if not args.quick:
+        print(f"results -> {write_results('reaching', res)}")
+    return res
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--no-scipy", action="store_true", help="with --table: skip the SciPy comparison")
     ap.add_argument("--fitted", action="store_true", help="with --table: the fitted time-constant variants too")
-    ap.add_argument("--max-steps", type=int, nargs=2, default=(40, 25))
-    ap.add_argument("--scipy-nfev", type=int, default=30)
+    ap.add_argument("--max-steps", type=int, nargs=2, default=(40, 3),
+                    help="LM iterations of stage 1 and stage 2 (fit_reaching's default is 40 25)")
+    ap.add_argument("--scipy-nfev", type=int, default=3, help="residual calls of the capped SciPy fit")
     args = ap.parse_args()
     if args.table:
         table(args)
         return
-    raise SystemExit("the fit-cost mode is not written yet")
+    fit_cost(args)
 
 
 if __name__ == "__main__":
