@@ -24,7 +24,9 @@ one compiled simulation (the per-motion ratios are array leaves).
   ``q_rest`` (4) [rad];
 - damping ``W = τ0 W̃``: ``damping="tau0_KJ"`` the paper's hypothesis ``W̃ = KJ`` (Eq 7);
   ``"diagonal"`` / ``"full"``: ``W̃`` free, SPD with ``tr W̃ = 4`` (3 / 9 more numbers), so
-  ``τ0 = tr W / tr KJ`` keeps its meaning and ``W̃ = KJ`` is inside both (nested models);
+  ``τ0 = tr W / tr KJ`` keeps its meaning; ``W̃ = KJ`` is inside ``"full"`` (nested models, and
+  stage 2 starts there) but inside ``"diagonal"`` only for a diagonal ``KJ`` (it starts at
+  ``diag KJ``);
 - planner: ``model="lambda0"`` Arimoto (Eq 8) with ``k = b_max / τ0`` (Eq 10);
   ``"lambda0_minjerk"`` the minimum-jerk time-base generator (``pmpjax.MinimumJerkPlanner``,
   straight hand path, minimum-jerk timing over ``duration``);
@@ -327,8 +329,8 @@ def _log_params_jnp(M):
 
 
 def _stage2_start(theta1, cfg: _Config):
-    """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` and time constants
-    at their tied values, so every variant starts from the paper's model."""
+    """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` (``"full"``: the
+    paper's model) or at ``diag KJ`` (``"diagonal"``), time constants at their tied values."""
     KJ = stiffness_from_params(theta1[:_N_K], 4, 4.0)
     parts = [theta1]
     if cfg.damping == "diagonal":
