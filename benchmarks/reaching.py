@@ -272,7 +272,7 @@ def markdown(res) -> str:
 
 
 def table(args):
-    variants = VARIANTS + (FITTED if args.fitted else ())
+    variants = (VARIANTS + (FITTED if args.fitted else ()))[: args.n_variants]
     kw = dict(max_steps=tuple(args.max_steps))
     subjects = SUBJECTS
     if args.quick:
@@ -315,8 +315,7 @@ def table(args):
         res["load_end"] = load()
         md = markdown(res)
         if not args.quick:
-            write_results("reaching_table", res)
-            path = os.path.join(os.path.dirname(write_results("reaching_table", res)), "reaching_table.md")
+            path = write_results(args.name, res).removesuffix(".json") + ".md"
             with open(path, "w") as f:
                 f.write(md + "\n")
     print(markdown(res))
@@ -413,6 +412,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
+    ap.add_argument("--n-variants", type=int, default=None, help="with --table: only the first N variants")
     ap.add_argument("--no-scipy", action="store_true", help="with --table: skip the SciPy comparison")
     ap.add_argument("--fitted", action="store_true", help="with --table: the fitted time-constant variants too")
     ap.add_argument("--max-steps", type=int, nargs=2, default=(40, 3),
