@@ -53,6 +53,8 @@ from fitting import _reaching as R  # noqa: E402
 
 SUBJECTS = (1, 2, 3, 4)
 VARIANTS = (("lambda0", "tau0_KJ", "tied"), ("lambda0", "full", "tied"), ("lambda0", "diagonal", "tied"))
+VARIANT_NAMES = {f"{m}/{d}/{t}": (m, d, t) for m, d, t in VARIANTS + (
+    ("lambda0", "tau0_KJ", "fitted"), ("lambda0", "diagonal", "fitted"), ("lambda0", "full", "fitted"))}
 FITTED = (("lambda0", "tau0_KJ", "fitted"), ("lambda0", "diagonal", "fitted"), ("lambda0", "full", "fitted"))
 
 
@@ -273,8 +275,10 @@ def markdown(res) -> str:
 
 def table(args):
     variants = (VARIANTS + (FITTED if args.fitted else ()))[: args.n_variants]
+    if args.variants:
+        variants = tuple(VARIANT_NAMES[v] for v in args.variants)
     kw = dict(max_steps=tuple(args.max_steps))
-    subjects = SUBJECTS
+    subjects = tuple(args.subjects)
     if args.quick:
         subjects, kw = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2))
         variants = variants[:2]
@@ -286,12 +290,22 @@ def table(args):
         key = f"{model}/{damping}/{tc}"
         log(f"fit {key} ...")
         fit, wall, comp = timed_fit(subjects, model=model, damping=damping, time_constants=tc, **kw)
+        if not args.quick:
+            import pickle
+
+            with open(write_results(args.name, res).removesuffix(".json") + f"_{damping}_{tc}.pkl", "wb") as f:
+                pickle.dump(fit, f)
         res["fits"][key] = fit_rows(fit, wall, comp)
         log(f"  fit {key}: {wall:.0f} s (compile {comp:.0f} s), status {fit.status.tolist()}, "
             f"lm {fit.lm_steps.tolist()}, steps/sample {fit.steps_per_sample}, aic {np.round(fit.aic, 0).tolist()}")
         t = time.perf_counter()
         pred = fitting.predict_reaching(fit, reps=(8, 9, 10))
         res["fits"][key]["predict_s"] = time.perf_counter() - t
+        if not args.quick:
+            import pickle
+
+            with open(write_results(args.name, res).removesuffix(".json") + f"_{damping}_{tc}_pred.pkl", "wb") as f:
+                pickle.dump(pred, f)
         preds[key] = pred
         res["predictors"][key] = predictor_rows(pred, "model")
         if key == "lambda0/tau0_KJ/tied" and not args.no_scipy:
@@ -412,7 +426,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="with --table: HuG-MP subjects")
     ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
+    ap.add_argument("--variants", nargs="+", choices=sorted(VARIANT_NAMES), help="with --table: these variants")
     ap.add_argument("--n-variants", type=int, default=None, help="with --table: only the first N variants")
     ap.add_argument("--no-scipy", action="store_true", help="with --table: skip the SciPy comparison")
     ap.add_argument("--fitted", action="store_true", help="with --table: the fitted time-constant variants too")

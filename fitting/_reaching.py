@@ -908,9 +908,24 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else jnp.zeros_like(model.W)
     tau0 = planner.tau0 if not minjerk else jnp.ones(len(q0))
-    steps = _stability_steps(np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk)), min_steps)
+    rates = np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk))
+    steps = _stability_steps(rates, min_steps)
+    # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
+    # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
+    bad = ~np.isfinite(rates) | (rates / ((SAMPLES - 1) * steps) > 2.4)
+    R_ = len(q0)
+    if bad.all():
+        nan = np.full((R_, SAMPLES), np.nan)
+        return nan[..., None] * np.ones(4), nan[..., None] * np.ones(3), np.full(R_, int(Status.SINGULAR))
+    if bad.any():
+        good = np.where(bad, int(np.argmin(bad)), np.arange(R_))
+        take = lambda a: a[good] if np.ndim(a) >= 1 and np.shape(a)[0] == R_ else a  # noqa: E731
+        model, planner = jax.tree_util.tree_map(take, (model, planner))
+        q0, target = np.asarray(q0)[good], np.asarray(target)[good]
     traj = _simulate(model, planner, q0, target, steps)
-    return np.asarray(traj.q), np.asarray(traj.x), _status_from(traj.status)
+    q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
+    q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
+    return q, x, status
 
 
 def _concat(a, b):
