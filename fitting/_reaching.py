@@ -393,7 +393,8 @@ def _equilibria(p, target, q_final):
 def _final_residual(theta, data, cfg: _Config):
     """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·4,) [rad], equilibria of the fitted ``KJ``, ``q_rest``."""
     q_obs, _, weight, elbow = data
-    p = _unpack(theta, cfg, elbow)
+    # stage 1 has only the postural parameters (KJ, q_rest): unpack them as the paper model
+    p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), elbow)
     q_eq, ok = _equilibria(p, _chain().fk(q_obs[:, -1]), q_obs[:, -1])
     r = (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None]
     return jnp.where((ok | (weight == 0))[:, None], r, jnp.nan).reshape(-1)
