@@ -33,6 +33,7 @@ Latest figures: (filled in below after the run)
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -256,7 +257,10 @@ def markdown(res) -> str:
     for v, f in res["fits"].items():
         cells = []
         for s in res["subjects"]:
-            e = f["subjects"][s]
+            e = f["subjects"].get(s)
+            if e is None:
+                cells.append("—")
+                continue
             cells.append(f"{e['loss']:.4g}; {e['aic']:.0f} / {e['bic']:.0f}; {e['lm_steps'][0]},{e['lm_steps'][1]}"
                          + ("" if e["status"] == 0 else f"; {e['message'].split(':')[0]}"))
         lines.append(f"| {v} | {f['n_params']} | " + " | ".join(cells) + " |")
@@ -422,11 +426,57 @@ def scipy_compare(args, fit, wall, comp, subjects, kw):
     return res
 
 
+def merge(args):
+    """Combine the tables of separate runs (``--name`` of each) into ``reaching_table``: every fit
+    and predictor, and paired Wilcoxon tests between runs with the same held-out rows."""
+    import pickle
+
+    base = os.path.dirname(write_results("reaching_table_merge_probe", {}))
+    os.remove(os.path.join(base, "reaching_table_merge_probe.json"))
+    runs = [json.load(open(os.path.join(base, f"{n}.json"))) for n in args.merge]
+    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=runs[0]["machine"],
+               merged=list(args.merge), subjects=sorted({s for r in runs for s in r["subjects"]}), fits={},
+               predictors={}, wilcoxon={})
+    preds = {}
+    for n, r in zip(args.merge, runs):
+        tag = f" [{','.join(r['subjects'])}; max_steps {r['options']['max_steps']}]"
+        for k, v in r["fits"].items():
+            res["fits"][k + tag] = v
+            _, d, t = k.split("/")
+            preds[k + tag] = pickle.load(open(os.path.join(base, f"{n}_{d}_{t}_pred.pkl"), "rb"))
+        for k, v in r["predictors"].items():
+            key = k + tag if k in r["fits"] else k
+            if k in R.BASELINES and k in res["predictors"] and len(res["predictors"][k]) >= len(v):
+                continue
+            res["predictors"][key] = {s: v.get(s, _EMPTY) for s in res["subjects"] + ["all"]}
+    keys = list(preds)
+    for i, a in enumerate(keys):
+        for b_ in keys[i + 1:]:
+            pa, pb = preds[a], preds[b_]
+            if len(pa.task) == len(pb.task) and np.array_equal(pa.rep, pb.rep) and np.array_equal(pa.task, pb.task):
+                res["wilcoxon"][f"{b_} vs {a}"] = wilcoxon(pa, pb)
+    for w in res["wilcoxon"].values():
+        for s in res["subjects"] + ["all"]:
+            w.setdefault(s, None)
+    order = list(res["predictors"])
+    res["predictors"] = {k: res["predictors"][k] for k in sorted(order, key=lambda k: (k in R.BASELINES,
+                                                                                        order.index(k)))}
+    md = markdown(res)
+    path = write_results("reaching_table", res).removesuffix(".json") + ".md"
+    with open(path, "w") as f:
+        f.write(md + "\n")
+    print(md)
+
+
+_EMPTY = dict(final=dict(n=0, n_failed=0, median=None, mean=None), rmse=dict(n=0, n_failed=0, median=None, mean=None))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true")
     ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="with --table: HuG-MP subjects")
+    ap.add_argument("--merge", nargs="+", help="combine the tables of these runs (--name) into reaching_table")
     ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
     ap.add_argument("--variants", nargs="+", choices=sorted(VARIANT_NAMES), help="with --table: these variants")
     ap.add_argument("--n-variants", type=int, default=None, help="with --table: only the first N variants")
@@ -436,6 +486,9 @@ def main():
                     help="LM iterations of stage 1 and stage 2 (fit_reaching's default is 40 25)")
     ap.add_argument("--scipy-nfev", type=int, default=3, help="residual calls of the capped SciPy fit")
     args = ap.parse_args()
+    if args.merge:
+        merge(args)
+        return
     if args.table:
         table(args)
         return
