@@ -396,6 +396,7 @@ def scipy_compare(args, fit, wall, comp, subjects, kw):
     except _Cap:
         pass
     t_sp = time.perf_counter() - t
+    nfev = len(calls) + 1
     fun(fit.params[k])  # the same residual at the JAX optimum
     c_opt = costs[-1]
     per_eval = float(np.median(calls))
@@ -471,11 +472,70 @@ def merge(args):
 _EMPTY = dict(final=dict(n=0, n_failed=0, median=None, mean=None), rmse=dict(n=0, n_failed=0, median=None, mean=None))
 
 
+def scipy_from(args):
+    """The SciPy loop on the one subject of a pickled ``--table`` run (``--scipy-from NAME``) whose
+    stage 2 made no accepted step, so that its parameters are the stage-1 point (checked against the
+    stage-1-only run ``reaching_table_donders`` when present); JAX timings from that run's JSON."""
+    import pickle
+
+    base = os.path.dirname(write_results("reaching_probe", {}))
+    os.remove(os.path.join(base, "reaching_probe.json"))
+    run = json.load(open(os.path.join(base, f"{args.scipy_from}.json")))
+    (key, f), = run["fits"].items()
+    _, d, t = key.split("/")
+    fit = pickle.load(open(os.path.join(base, f"{args.scipy_from}_{d}_{t}.pkl"), "rb"))
+    assert len(fit.subjects) == 1 and d == "tau0_KJ" and t == "tied"
+    m = R._motions(fit.subjects[0], None, fit.reps, fit.tasks)
+    elbow = m.q_obs[:, -1, 3].mean()
+    p, it = len(fit.param_names), int(fit.lm_steps[0][1])
+    start = fit.params[0]
+    calls, costs = [], []
+
+    def fun(theta):
+        if len(calls) >= args.scipy_nfev:
+            raise _Cap
+        t0 = time.perf_counter()
+        r = residual_np(theta, m.q_obs, m.t_ratio, elbow)
+        calls.append(time.perf_counter() - t0)
+        costs.append(0.5 * float(r @ r))
+        return r
+
+    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}) from the stage-1 point, capped at "
+        f"{args.scipy_nfev} residual calls ...")
+    t0 = time.perf_counter()
+    try:
+        scipy.optimize.least_squares(fun, start, method="lm", xtol=1e-8, ftol=1e-8)
+    except _Cap:
+        pass
+    t_sp = time.perf_counter() - t0
+    per_eval = float(np.median(calls))
+    jax_run = f["run_s"]
+    extrap = per_eval * (p + 1) * max(it, 1)
+    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine="2-core AMD EPYC Zen 4 KVM, no GPU",
+               jax=dict(run=args.scipy_from, subject=m.subject, wall_s=f["wall_s"], compile_s=f["compile_s"],
+                        run_s=jax_run, load=f["load"], lm_steps=fit.lm_steps.tolist(), loss=float(fit.loss[0]),
+                        steps_per_sample=fit.steps_per_sample,
+                        compile_method="union of jax.monitoring trace/lower/compile time spans inside the call"),
+               scipy=dict(subject=m.subject, n_motions=len(m), p=p, residual_calls=len(calls), seconds=t_sp,
+                          seconds_per_residual=per_eval, cost_at_start=costs[0], jax_cost_at_start=float(fit.loss[0]),
+                          rel_cost_diff=abs(costs[0] / float(fit.loss[0]) - 1), jax_lm_iterations=it,
+                          extrapolated_seconds=extrap, load=load(),
+                          integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9",
+                          optimiser="least_squares lm, 2-point Jacobian"),
+               ratios={"scipy_subject_vs_jax_subject_run": extrap / jax_run,
+                       "scipy_subject_vs_jax_subject_incl_compile": extrap / f["wall_s"]})
+    log(f"  SciPy {per_eval:.1f} s per residual ({len(calls)} calls); cost at the start: NumPy {costs[0]:.6g}, "
+        f"JAX {fit.loss[0]:.6g}; extrapolated {extrap:.0f} s vs JAX run {jax_run:.0f} s "
+        f"({res['ratios']['scipy_subject_vs_jax_subject_run']:.1f}x)")
+    print(f"results -> {write_results('reaching', res)}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true")
     ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="with --table: HuG-MP subjects")
+    ap.add_argument("--scipy-from", help="the SciPy loop against a pickled one-subject --table run (NAME)")
     ap.add_argument("--merge", nargs="+", help="combine the tables of these runs (--name) into reaching_table")
     ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
     ap.add_argument("--variants", nargs="+", choices=sorted(VARIANT_NAMES), help="with --table: these variants")
@@ -488,6 +548,9 @@ def main():
     args = ap.parse_args()
     if args.merge:
         merge(args)
+        return
+    if args.scipy_from:
+        scipy_from(args)
         return
     if args.table:
         table(args)
