@@ -258,6 +258,14 @@ def test_free_damping_variants_start_inside_the_paper_model(rng):
                 nested = damping == "full" or not s[3:].any()
                 np.testing.assert_allclose(p["W"], KJ if nested else np.diag(np.diag(KJ)), atol=1e-10,
                                            err_msg=f"{damping} {tc} W")
+    # stage 1 sees only KJ and q_rest: its residual (12 parameters) must not depend on the damping
+    # variant (damping="full" used to read W entries past the end of the stage-1 vector and fail)
+    m = R._motions(2, None, (1,), (1,))
+    data = (jnp.asarray(m.q_obs[:2]), jnp.asarray(m.t_ratio[:2]), jnp.ones(2), jnp.asarray(1.0))
+    th = jnp.asarray(np.r_[np.zeros(9), m.q_obs[:2, -1, :3].mean(0)])
+    ref = R._final_residual(th, data, R._Config("lambda0", "tau0_KJ", "tied", 5))
+    assert np.all(np.isfinite(ref)) and np.abs(ref).max() > 1e-3
+    np.testing.assert_array_equal(R._final_residual(th, data, R._Config("lambda0", "full", "fitted", 5)), ref)
 
 # --- real recordings: the held-out split, predictions, bad input --------------------------------
 
