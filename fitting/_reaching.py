@@ -24,7 +24,9 @@ one compiled simulation (the per-motion ratios are array leaves).
   ``q_rest`` (4) [rad];
 - damping ``W = τ0 W̃``: ``damping="tau0_KJ"`` the paper's hypothesis ``W̃ = KJ`` (Eq 7);
   ``"diagonal"`` / ``"full"``: ``W̃`` free, SPD with ``tr W̃ = 4`` (3 / 9 more numbers), so
-  ``τ0 = tr W / tr KJ`` keeps its meaning and ``W̃ = KJ`` is inside both (nested models);
+  ``τ0 = tr W / tr KJ`` keeps its meaning; ``W̃ = KJ`` is inside ``"full"`` (nested models, and
+  stage 2 starts there) but inside ``"diagonal"`` only for a diagonal ``KJ`` (it starts at
+  ``diag KJ``);
 - planner: ``model="lambda0"`` Arimoto (Eq 8) with ``k = b_max / τ0`` (Eq 10);
   ``"lambda0_minjerk"`` the minimum-jerk time-base generator (``pmpjax.MinimumJerkPlanner``,
   straight hand path, minimum-jerk timing over ``duration``);
@@ -326,8 +328,8 @@ def _log_params_jnp(M):
 
 
 def _stage2_start(theta1, cfg: _Config):
-    """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` and time constants
-    at their tied values, so every variant starts from the paper's model."""
+    """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` (``"full"``: the
+    paper's model) or at ``diag KJ`` (``"diagonal"``), time constants at their tied values."""
     KJ = stiffness_from_params(theta1[:_N_K], 4, 4.0)
     parts = [theta1]
     if cfg.damping == "diagonal":
@@ -390,7 +392,8 @@ def _equilibria(p, target, q_final):
 def _final_residual(theta, data, cfg: _Config):
     """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·4,) [rad], equilibria of the fitted ``KJ``, ``q_rest``."""
     q_obs, _, weight, elbow = data
-    p = _unpack(theta, cfg, elbow)
+    # stage 1 has only the postural parameters (KJ, q_rest): unpack them as the paper model
+    p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), elbow)
     q_eq, ok = _equilibria(p, _chain().fk(q_obs[:, -1]), q_obs[:, -1])
     r = (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None]
     return jnp.where((ok | (weight == 0))[:, None], r, jnp.nan).reshape(-1)
@@ -905,9 +908,24 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else jnp.zeros_like(model.W)
     tau0 = planner.tau0 if not minjerk else jnp.ones(len(q0))
-    steps = _stability_steps(np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk)), min_steps)
+    rates = np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk))
+    steps = _stability_steps(rates, min_steps)
+    # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
+    # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
+    bad = ~np.isfinite(rates) | (rates / ((SAMPLES - 1) * steps) > 2.4)
+    R_ = len(q0)
+    if bad.all():
+        nan = np.full((R_, SAMPLES), np.nan)
+        return nan[..., None] * np.ones(4), nan[..., None] * np.ones(3), np.full(R_, int(Status.SINGULAR))
+    if bad.any():
+        good = np.where(bad, int(np.argmin(bad)), np.arange(R_))
+        take = lambda a: a[good] if np.ndim(a) >= 1 and np.shape(a)[0] == R_ else a  # noqa: E731
+        model, planner = jax.tree_util.tree_map(take, (model, planner))
+        q0, target = np.asarray(q0)[good], np.asarray(target)[good]
     traj = _simulate(model, planner, q0, target, steps)
-    return np.asarray(traj.q), np.asarray(traj.x), _status_from(traj.status)
+    q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
+    q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
+    return q, x, status
 
 
 def _concat(a, b):

@@ -223,6 +223,50 @@ def test_fit_jacobian_matches_central_differences(synthetic, synthetic_fit):
         assert np.allclose(J @ v, fd, atol=2e-6 * np.abs(fd).max())
 
 
+
+def test_free_damping_variants_start_inside_the_paper_model(rng):
+    # The damping variants are compared as nested models (AIC/BIC in benchmarks/reaching.py): the
+    # stage-2 start of damping="full" must be exactly W̃ = KJ with every other parameter as in
+    # "tau0_KJ", so that its residual (a function of _unpack's output only) is the paper model's.
+    # "diagonal" holds W̃ = KJ only for a diagonal KJ; otherwise it starts at diag(KJ).
+    # Reference KJ: t·expm(S)/tr expm(S) by SciPy from the documented parametrisation.
+    from scipy.linalg import expm
+
+    def kj_ref(s):
+        S = np.zeros((4, 4))
+        for k, (i, j) in enumerate([(0, 0), (1, 1), (2, 2)] + [(i, j) for i in range(4) for j in range(i + 1, 4)]):
+            S[i, j] = S[j, i] = s[k]
+        S[3, 3] = -s[:3].sum()
+        E = expm(S)
+        return 4 * E / np.trace(E)
+
+    elbow = 1.1
+    for s in (rng.normal(scale=0.4, size=9), np.r_[rng.normal(scale=0.4, size=3), np.zeros(6)]):
+        theta = jnp.asarray(np.r_[s, np.deg2rad([-30.0, -35.0, -5.0])])
+        KJ = kj_ref(s)
+        for tc in ("tied", "fitted"):
+            ref = R._unpack(R._stage2_start(theta, R._Config("lambda0", "tau0_KJ", tc, 5)),
+                            R._Config("lambda0", "tau0_KJ", tc, 5), elbow)
+            np.testing.assert_allclose(ref["W"], KJ, atol=1e-12)
+            for damping in ("full", "diagonal"):
+                cfg = R._Config("lambda0", damping, tc, 5)
+                th = R._stage2_start(theta, cfg)
+                assert th.shape == (len(R._param_names(cfg)),)
+                p = R._unpack(th, cfg, elbow)
+                for key in ("KJ", "q_rest", "tau", "tau0"):
+                    np.testing.assert_allclose(p[key], ref[key], rtol=1e-12, err_msg=f"{damping} {tc} {key}")
+                nested = damping == "full" or not s[3:].any()
+                np.testing.assert_allclose(p["W"], KJ if nested else np.diag(np.diag(KJ)), atol=1e-10,
+                                           err_msg=f"{damping} {tc} W")
+    # stage 1 sees only KJ and q_rest: its residual (12 parameters) must not depend on the damping
+    # variant (damping="full" used to read W entries past the end of the stage-1 vector and fail)
+    m = R._motions(2, None, (1,), (1,))
+    data = (jnp.asarray(m.q_obs[:2]), jnp.asarray(m.t_ratio[:2]), jnp.ones(2), jnp.asarray(1.0))
+    th = jnp.asarray(np.r_[np.zeros(9), m.q_obs[:2, -1, :3].mean(0)])
+    ref = R._final_residual(th, data, R._Config("lambda0", "tau0_KJ", "tied", 5))
+    assert np.all(np.isfinite(ref)) and np.abs(ref).max() > 1e-3
+    np.testing.assert_array_equal(R._final_residual(th, data, R._Config("lambda0", "full", "fitted", 5)), ref)
+
 # --- real recordings: the held-out split, predictions, bad input --------------------------------
 
 
