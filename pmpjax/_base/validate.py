@@ -64,6 +64,17 @@ def check_positive(name: str, x: Any) -> None:
         raise ValueError(f"`{name}` must be positive, got {a.min() if a.size else a}")
 
 
+def positive_float(name: str, v: Any) -> float:
+    """A concrete, positive, finite scalar (durations and steps that set a step count) as ``float``;
+    ``ValueError`` naming ``name`` when it is traced, NaN/inf or not positive."""
+    if not is_concrete(v):
+        raise ValueError(f"`{name}` must be a concrete Python float (it sets the step count)")
+    if np.ndim(v) != 0:
+        raise ValueError(f"`{name}` must be a scalar, got shape {np.shape(v)}")
+    check_positive(name, v)
+    return float(v)
+
+
 def check_positive_int(name: str, v: Any, minimum: int = 1) -> int:
     """Require ``v`` to be an integer >= ``minimum`` (counts, step limits); returns ``int(v)``."""
     if int(v) != v or v < 1:

@@ -12,10 +12,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .._base.linalg import det, mm, mv, to_soa
+from .._base.batching import flatten_batch
+from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
-from .._base.validate import as_array, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive_int, is_concrete, positive_float
+from .._chains.kinematics import manipulability_soa
 from .integrate import integrate_observed
 from .models import _PMP
 from .planners import Planner
@@ -107,21 +109,6 @@ def _schedule(saveat: SaveAt, duration: float, dt: float) -> _Schedule:
     return _Schedule(n_steps, tuple(starts), tuple((ends - starts) / n_steps), bool(include0), tuple(ts))
 
 
-def _check_scalar(name, v):
-    if isinstance(v, jax.core.Tracer):
-        raise ValueError(f"`{name}` must be a concrete Python float (it sets the step count)")
-    v = float(v)
-    if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"`{name}` must be positive and finite, got {v}")
-    return v
-
-
-def _flat(x, batch, core):
-    x = jnp.asarray(x)
-    B = math.prod(batch)
-    return jnp.broadcast_to(x, batch + x.shape[x.ndim - core:]).reshape((B,) + x.shape[x.ndim - core:])
-
-
 @partial(jax.jit, static_argnames=("batch",))
 def _rates(model, q0, *, batch):
     """Eigenvalues of ``M = B(q0)⁻¹`` (*batch, m) and the largest |eig| of ``A KJ`` (elastic)."""
@@ -190,8 +177,8 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     q0 = jnp.asarray(as_array("q0", q0, tail=(n,)), float)
     targets = jnp.asarray(as_array("targets", targets, tail=(None, m)), float)
     chain.check_target("targets", targets)
-    duration = _check_scalar("duration", duration)
-    dt = _check_scalar("dt", dt)
+    duration = positive_float("duration", duration)
+    dt = positive_float("dt", dt)
     sched = _schedule(saveat or SaveAt(), duration, dt)
     batch = tuple(
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
@@ -289,12 +276,12 @@ def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_ini
     n, m = chain.n, chain.m
     B = math.prod(batch)
     core = {"W": 2, "KJ": 2, "q_rest": 1}
-    model = replace(model, **{k: _flat(getattr(model, k), batch, c) for k, c in core.items()
+    model = replace(model, **{k: flatten_batch(getattr(model, k), batch, c) for k, c in core.items()
                               if getattr(model, k) is not None})
     consts = model.prepare_soa((B,))
     planner = planner.to_soa(batch)
-    q = to_soa(_flat(q0, batch, 1))
-    tg = jnp.moveaxis(_flat(targets, batch, 2), 0, -1)  # (M, m, B)
+    q = to_soa(flatten_batch(q0, batch, 1))
+    tg = jnp.moveaxis(flatten_batch(targets, batch, 2), 0, -1)  # (M, m, B)
     n_mov, n_seg = tg.shape[0], t0s.shape[0]
     # Saved: the start of every segment (the first unless `include_initial`) and the last end.
     S, offset = n_seg + include_initial, 1 - include_initial
@@ -307,7 +294,7 @@ def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_ini
         x, J = chain.fk_jac_soa(qc)
         P, M = admittance_terms_soa(J, consts["A"])
         qd = model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
-        w = jnp.sqrt(jnp.maximum(det(mm(J, jnp.swapaxes(J, 0, 1))), 0.0))
+        w = manipulability_soa(J)
         return qd, (qc, x, qd, mv(J, qd), w[None])
 
     def write(acc, j, obs, valid):
