@@ -395,8 +395,9 @@ def _final_residual(theta, data, cfg: _Config):
     # stage 1 has only the postural parameters (KJ, q_rest): unpack them as the paper model
     p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), elbow)
     q_eq, ok = _equilibria(p, _chain().fk(q_obs[:, -1]), q_obs[:, -1])
-    r = (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None]
-    return jnp.where((ok | (weight == 0))[:, None], r, jnp.nan).reshape(-1)
+    used = (weight > 0)[:, None]
+    r = jnp.where(used, (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None], 0.0)  # left-out motions: 0
+    return jnp.where(ok[:, None] | ~used, r, jnp.nan).reshape(-1)
 
 
 def _trajectory_residual(theta, data, cfg: _Config, steps: int):
@@ -414,7 +415,9 @@ def _trajectory_residual(theta, data, cfg: _Config, steps: int):
     d = traj.q - q_obs
     r = jnp.concatenate([(d[:, 1:] * (sw / math.sqrt(SAMPLES - 1))[:, None, None]).reshape(d.shape[0], -1),
                          d[:, -1] * (FINAL_WEIGHT * sw)[:, None]], axis=1)
-    good = ((traj.status == 0) & stable) | (weight == 0)
+    used = weight > 0
+    r = jnp.where(used[:, None], r, 0.0)  # left-out and padding motions contribute nothing
+    good = ((traj.status == 0) & stable) | ~used
     return jnp.where(good[:, None], r, jnp.nan).reshape(-1)
 
 
@@ -429,6 +432,16 @@ def _stage1_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Con
         cov, se, sv, _ = covariance(r)
         return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, steps=r.steps,
                     start=_stage2_start(r.x, cfg), cov=cov, se=se, sv=sv)
+
+    return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
+
+
+@partial(jax.jit, static_argnames=("cfg",))
+def _start_usable(theta0, q_obs, t_ratio, weight, elbow, *, cfg: _Config):
+    """(S, B) bool: motions whose final-posture equilibrium exists at the stage-1 start."""
+
+    def one(th, q, tr, w, e):
+        return jnp.all(jnp.isfinite(_final_residual(th, (q, tr, w, e), cfg).reshape(-1, 4)), axis=-1)
 
     return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
 
@@ -489,8 +502,14 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), t
     q_final_mean = np.stack([m.q_obs[:, -1].mean(0) for m in motions])
     elbow = q_final_mean[:, 3]  # the gauge of the unidentifiable elbow rest angle (module docstring)
     out["elbow"] = elbow
+    out["dropped"] = [np.zeros(0, int) for _ in motions]
     if theta0 is None:
         th1 = np.concatenate([np.zeros((S, _N_K)), q_final_mean[:, :3]], -1)
+        # A motion whose equilibrium fails at the start (KJ = I, q_rest = mean final posture) would
+        # make the start non-finite and stop Levenberg–Marquardt for the whole subject: leave it out.
+        ok = np.asarray(_start_usable(th1, q_obs, t_ratio, weight, elbow, cfg=cfg))
+        out["dropped"] = [np.flatnonzero(~ok[s, : len(m)]) for s, m in enumerate(motions)]
+        weight = weight * ok
         s1 = jax.device_get(_stage1_batch(th1, q_obs, t_ratio, weight, elbow, np.int32(max_steps[0]), cfg=cfg))
         theta0 = s1["start"]
         out.update(x1=s1["x"], cost1=s1["cost"], converged1=s1["converged"], steps1=s1["steps"])
@@ -505,7 +524,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), t
         pad = lambda a, *shape: np.concatenate([a, np.full(shape, np.nan)], -1)  # noqa: E731
         cov = np.full((S, p, p), np.nan)
         cov[:, :k, :k] = s1["cov"]
-        n_res = np.array([len(m) * 4 for m in motions])
+        n_res = np.array([(len(m) - len(d)) * 4 for m, d in zip(motions, out["dropped"])])
         fix = (s1["residual"].shape[-1] - k) / np.maximum(n_res - k, 1)
         out.update(x=theta0, cost=s1["cost"], residual=s1["residual"], converged=s1["converged"],
                    steps2=np.zeros(S, int), cov=cov * fix[:, None, None],
@@ -516,7 +535,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), t
     if not keep_jac:
         s2.pop("jac")
     out.update({k if k != "steps" else "steps2": v for k, v in jax.device_get(s2).items()})
-    n_res = np.array([len(m) * ((SAMPLES - 1) * 4 + 4) for m in motions])
+    n_res = np.array([(len(m) - len(d)) * ((SAMPLES - 1) * 4 + 4) for m, d in zip(motions, out["dropped"])])
     N_total = out["residual"].shape[-1]
     # ``covariance`` divides by N − p over the padded residual; padded motions are not data.
     fix = (N_total - p) / np.maximum(n_res - p, 1)
@@ -806,6 +825,10 @@ def fit_reaching(
                       stacklevel=2)
     mlist = list(usable.values())
     out = _fit_motions(mlist, cfg, max_steps=ms)
+    for name, m, dropped in zip(usable, mlist, out["dropped"]):
+        skipped[name] += [(int(m.task[i]), int(m.rep[i]), int(m.index[i]),
+                           "no equilibrium of the starting model (KJ = I, q_rest = mean final posture): "
+                           "left out of the fit") for i in dropped]
     ikw = _ik_weights(mlist)
     return _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, directory, ms)
 
@@ -842,12 +865,14 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         res["duration_over_T_rec"][a] = pars["duration"]
         res["loss"][a] = cost
         res["params"][a], res["stderr"][a], res["cov"][a] = x, out["se"][k], out["cov"][k]
-        res["rmse_deg"][a] = _training_rmse_deg(out["residual"][k], len(usable[name]), out["stage"])
+        n_fitted = len(usable[name]) - len(out["dropped"][k])
+        res["rmse_deg"][a] = _training_rmse_deg(out["residual"][k], len(usable[name]), max(n_fitted, 1),
+                                                out["stage"])
         res["aic"][a] = n * np.log(2 * cost / n) + 2 * p
         res["bic"][a] = n * np.log(2 * cost / n) + p * np.log(n)
         res["mean_posture"][a] = usable[name].q_obs.reshape(-1, 4).mean(0)
         res["ik_weights"][a] = ikw[k]
-        n_motions[a], n_res[a] = len(usable[name]), n
+        n_motions[a], n_res[a] = n_fitted, n
         lm_steps[a] = out["steps1"][k], out["steps2"][k]
         if not np.isfinite(cost):
             status[a] = int(Status.NONFINITE)
@@ -862,13 +887,15 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
     )
 
 
-def _training_rmse_deg(residual, n_motions, stage):
+def _training_rmse_deg(residual, n_slots, n_fitted, stage):
+    """RMS training error [deg] over the ``n_fitted`` fitted motions among the first ``n_slots``
+    (left-out motions have zero residual)."""
     if stage == 1:  # final postures only
-        return float(np.rad2deg(np.sqrt(np.mean(residual[: n_motions * 4] ** 2))))
+        return float(np.rad2deg(np.sqrt(np.sum(residual[: n_slots * 4] ** 2) / (n_fitted * 4))))
     per = (SAMPLES - 1) * 4 + 4
-    r = residual[: n_motions * per].reshape(n_motions, per)[:, : (SAMPLES - 1) * 4] * math.sqrt(SAMPLES - 1)
+    r = residual[: n_slots * per].reshape(n_slots, per)[:, : (SAMPLES - 1) * 4] * math.sqrt(SAMPLES - 1)
     # the sample at s = 0 is the recorded start posture itself (zero error): RMS over all 50
-    return float(np.rad2deg(np.sqrt(np.sum(r**2) / (n_motions * SAMPLES * 4))))
+    return float(np.rad2deg(np.sqrt(np.sum(r**2) / (n_fitted * SAMPLES * 4))))
 
 
 # ---------------------------------------------------------------------------------------------
