@@ -565,7 +565,8 @@ class ReachingFit:
     (joint trajectories; final postures when ``max_steps[1] = 0``); ``params``, ``stderr`` (S, p),
     ``cov`` (S, p, p) with ``param_names``; ``aic``, ``bic`` (S,); ``n_motions``,
     ``n_residuals``, ``lm_steps`` (S, 2); ``mean_posture`` (S, 4) [rad] and ``ik_weights`` (S, 4)
-    from the fitted repetitions (baselines); ``skipped`` {subject: [(task, rep, index, reason)]};
+    from the fitted repetitions (baselines); ``skipped`` {subject: [(task, rep, index, reason)]}
+    (unusable motions, and motions left out because the starting model has no equilibrium for them);
     ``problems`` {subject: message} for subjects that could not be fitted.
     """
 

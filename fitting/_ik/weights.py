@@ -451,6 +451,8 @@ def estimate_ik_weights(
 
     **Returns:** :class:`IKWeightsResult`. Not differentiable (clipping, stopping rule); see
     :func:`estimate_ik_weights_lm` for the gradient-based variant.
+
+    **Compile time:** ≈ 4 s on first use per bucketed batch shape (benchmarks/compile_times.py).
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
     _check_gamma(gamma, gamma_rate)
@@ -638,6 +640,9 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     ``jax.jvp``, inside ``jit``/``vmap``): the fitted optimum is differentiated by the implicit
     function theorem (exact Hessian of the cost at the optimum), not through the iterations. Items
     whose fit did not converge have zero derivative.
+
+    **Compile time:** ≈ 12 s on first use (LM with a forward-mode Jacobian;
+    benchmarks/compile_times.py).
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
     _check_gamma(gamma, None)

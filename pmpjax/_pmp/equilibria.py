@@ -194,6 +194,9 @@ def equilibrium_posture(
 
     **Raises:** ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
     NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_iter``.
+
+    **Compile time:** ≈ 3.7 s for the first call of a batch size (bucketed to powers of two), see
+    benchmarks/compile_times.py.
     """
     if not isinstance(chain, Chain):
         raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
