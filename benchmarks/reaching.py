@@ -88,6 +88,12 @@ Held-out table (``reaching_table.md``, merged runs)::
     |---|---|---|---|---|---|
     | full (40,2) vs τ0KJ (40,2) | — | -1.47, p=1.2e-13, 96% | — | — | -1.47, p=1.2e-13, 96% |
 
+After these runs (2026-12-02 01:00 UTC, load 2.8) stage 1 leaves out motions whose equilibrium
+fails at its start (they made the start non-finite and stopped LM for the whole subject: the S03 and
+S04 rows above): ``fit_reaching([3, 4], max_steps=(15, 0))`` leaves out one motion each, reaches a
+finite loss (0.65 / 1.00; training RMSE 2.4° / 2.9°; still MAX_STEPS at 15 iterations), and
+predicts held-out final postures to a median 1.9° (S03) and 3.6° (S04), joint RMSE 15.1° / 16.8°.
+
 Findings (from these runs):
 
 - **Final postures**: the λ0-PMP (fitted or not) predicts held-out final postures to a median 3–5°,
