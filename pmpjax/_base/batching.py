@@ -30,11 +30,12 @@ def broadcast_batch(**arrays: tuple[Any, int]) -> tuple[int, ...]:
         raise ValueError(f"leading (batch) axes of {desc} do not broadcast") from e
 
 
-def flatten_batch(a, batch: tuple[int, ...], core: int, *, dtype=None):
-    """Broadcast ``a`` (..., *core) to ``batch + core`` and flatten to ``(prod(batch), *core)``."""
-    a = jnp.asarray(a, dtype)
+def flatten_batch(a, batch: tuple[int, ...], core: int, *, dtype=None, xp=jnp):
+    """Broadcast ``a`` (..., *core) to ``batch + core`` and flatten to ``(prod(batch), *core)``
+    (``xp=np`` for NumPy in and out, e.g. for C MuJoCo)."""
+    a = xp.asarray(a, dtype)
     core_shape = a.shape[a.ndim - core :]
-    return jnp.broadcast_to(a, batch + core_shape).reshape((math.prod(batch),) + core_shape)
+    return xp.broadcast_to(a, batch + core_shape).reshape((math.prod(batch),) + core_shape)
 
 
 def unflatten_batch(a, batch: tuple[int, ...]):

@@ -24,6 +24,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from .._base.batching import bucket, pad_rows
 from .._base.validate import check_positive_int
 from .matlab import _as_path, mat_version
 
@@ -212,8 +213,7 @@ def _jacobians(chain, q):
     flat = q.reshape(-1, q.shape[-1])
     # pad the sample count to a power of two so that subjects of similar size share one compile
     N = flat.shape[0]
-    P = max(1024, 1 << (N - 1).bit_length())
-    qc = np.concatenate([flat, np.zeros((P - N, q.shape[-1]))]).T
+    qc = pad_rows(flat, bucket(N, minimum=1024), fill="zeros").T
     J = np.asarray(_jac_soa(chain, qc))[..., :N]
     return np.moveaxis(J, (0, 1), (-2, -1)).reshape(q.shape[:-1] + J.shape[:2]).copy()
 

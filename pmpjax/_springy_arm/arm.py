@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import os
 from importlib import resources
 from typing import Any, NamedTuple
@@ -40,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import flatten_batch
 from .._base.mujoco import import_mjx, import_mujoco, load_spec
 from .._base.pytree import pytree_dataclass
 from .._base.validate import as_array, check_positive_int, is_concrete
@@ -281,18 +281,6 @@ def _rollout_batch(mx, layout, controller, K, B, q0, qdot0, q_set0, c0, inputs):
     """Flat batch: every array argument has a leading (Bt,) axis; the controller's leaves too."""
     fn = functools.partial(_scan_arm, mx, layout, controller)
     return jax.vmap(fn)(K, B, q0, qdot0, q_set0, c0, inputs)
-
-
-def _broadcast_batch(batch, x, core):
-    x = jnp.asarray(x)
-    B = math.prod(batch)
-    return jnp.broadcast_to(x, batch + x.shape[x.ndim - core :]).reshape((B,) + x.shape[x.ndim - core :])
-
-
-def _broadcast_batch_np(batch, x, core):
-    x = np.asarray(x, float)
-    B = math.prod(batch)
-    return np.broadcast_to(x, batch + x.shape[x.ndim - core :]).reshape((B,) + x.shape[x.ndim - core :])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -544,7 +532,7 @@ def run_controller(
         raise ValueError(f"leading (batch) axes of K, B, q0, qdot0, q_set0, probe, force do not broadcast: {e}") from e
     if backend == "mujoco":
         _check_c_backend(arm, K, B, q0, qdot0, q_set0, probe, force, ctrl_inputs)
-        flat = lambda x, core: _broadcast_batch_np(batch, x, core)  # noqa: E731
+        flat = lambda x, core: flatten_batch(x, batch, core, dtype=float, xp=np)  # noqa: E731
         ctrl = jax.tree_util.tree_map(lambda x: flat(x, np.ndim(x) - len(batch_shape)), ctrl_inputs)
         args = (flat(K, 1), flat(B, 1), flat(q0, 1), flat(qdot0, 1), flat(q_set0, 1))
         (q, qd, qs, tau, touch, hand, log), qT, qdT = _run_controller_c(
@@ -552,7 +540,7 @@ def run_controller(
         )
         t = np.arange(T) * arm.dt
     else:
-        flat = lambda x, core: _broadcast_batch(batch, x, core)  # noqa: E731
+        flat = lambda x, core: flatten_batch(x, batch, core)  # noqa: E731
         ctrl = jax.tree_util.tree_map(lambda x: flat(x, jnp.ndim(x) - len(batch_shape)), ctrl_inputs)
         args = (flat(K, 1), flat(B, 1), flat(q0, 1), flat(qdot0, 1), flat(q_set0, 1))
         c0 = jax.vmap(controller.init)(args[4])
@@ -642,7 +630,7 @@ def rollout(
         )
     except ValueError as e:
         raise ValueError(f"leading (batch) axes of q_set, K, B, q0, qdot0, probe, force do not broadcast: {e}") from e
-    flat = lambda x, core: _broadcast_batch_np(batch, x, core)  # noqa: E731
+    flat = lambda x, core: flatten_batch(x, batch, core, dtype=float, xp=np)  # noqa: E731
     rec, qT, qdT = _rollout_c(
         arm, flat(q_set, 2), flat(K, 1), flat(B, 1), flat(q0, 1), flat(qdot0, 1), flat(probe, 2), flat(force, 2),
         nthread,

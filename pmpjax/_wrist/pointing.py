@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import bucket, pad_rows
 from .._base.pytree import replace
 from .._base.validate import check_positive_int
 from .._chains.kinematics import Wrist
@@ -408,13 +409,9 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
     is ``s``; ``xdot``, ``qdot`` are per unit ``s``: divide by ``T`` for physical rates).
     """
     B = np.shape(q0)[0]
-    Bp = max(16, 1 << (B - 1).bit_length()) if pad else B
-
-    def pad(a):
-        a = jnp.asarray(a, float)
-        return jnp.concatenate([a, jnp.broadcast_to(a[:1], (Bp - B,) + a.shape[1:])]) if Bp > B else a
-
-    KJ, q_rest, r0, r, q0, target = (pad(a) for a in (KJ, q_rest, tau0_ratio, tau_ratio, q0, target))
+    Bp = bucket(B, minimum=16) if pad else B
+    KJ, q_rest, r0, r, q0, target = (pad_rows(jnp.asarray(a, float), Bp)
+                                     for a in (KJ, q_rest, tau0_ratio, tau_ratio, q0, target))
     model = Lambda0PMP(Wrist(d), KJ=KJ, q_rest=q_rest, W=r0[:, None, None] * KJ)
     tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span), dt=float(dt))
     return replace(tr, q=tr.q[:B], x=tr.x[:B], qdot=tr.qdot[:B], xdot=tr.xdot[:B],
