@@ -67,6 +67,7 @@ from pmpjax import (
 )
 from pmpjax.internal import (
     as_array,
+    bucket,
     check_positive_int,
     check_spd,
     drop_trials,
@@ -220,14 +221,9 @@ def _joint_angles_jit(quat):
     return joint_angles_from_quat(quat)
 
 
-def _bucket(n: int, least: int = 16) -> int:
-    """Padded size (a power of two >= ``least``) so that calls of similar size share a compile."""
-    return max(least, 1 << (int(n) - 1).bit_length())
-
-
 def _joint_angles(quat):
     N = quat.shape[0]
-    pad = np.concatenate([quat, np.tile([[1.0, 0.0, 0.0, 0.0]], (_bucket(N, 1024) - N, 1))])
+    pad = np.concatenate([quat, np.tile([[1.0, 0.0, 0.0, 0.0]], (bucket(N, minimum=1024) - N, 1))])
     return np.asarray(_joint_angles_jit(pad))[:N]
 
 
@@ -384,10 +380,10 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
     a_sum, a_net = nan(S, L, K), nan(S, L, K)
     if keys:
         n_max = max(segments[key].shape[0] for key in keys)
-        n_pad = _bucket(n_max)
+        n_pad = bucket(n_max, minimum=16)
         P = np.stack([np.concatenate([segments[key], np.repeat(segments[key][-1:], n_pad - segments[key].shape[0], 0)])
                       for key in keys])
-        P = np.concatenate([P, np.repeat(P[:1], _bucket(len(keys)) - len(keys), 0)])
+        P = np.concatenate([P, np.repeat(P[:1], bucket(len(keys), minimum=16) - len(keys), 0)])
         dirs = np.stack([targets[j, 1] - targets[j, 0] for _, j, _ in keys])
         # The line joins the movement's own start and end; its direction is the targets'.
         sgn = np.sign(np.einsum("bi,bi->b", P[:len(keys), -1] - P[:len(keys), 0], dirs))

@@ -29,6 +29,7 @@ from pmpjax.internal import (
     check_positive,
     check_positive_int,
     det,
+    flatten_batch,
     is_concrete,
     mv,
     pinv_apply_diag_soa,
@@ -471,8 +472,7 @@ def estimate_ik_weights(
     _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    flat = lambda a, k: a.reshape((B,) + a.shape[a.ndim - k:])  # noqa: E731
-    arrays = [flat(qdot, 2), flat(xdot, 2), flat(J, 3),
+    arrays = [flatten_batch(qdot, batch, 2), flatten_batch(xdot, batch, 2), flatten_batch(J, batch, 3),
               np.ones((B, K), bool) if mask is None else mask.reshape(B, K),
               jnp.broadcast_to(g, batch).reshape(B)]
     if on_invalid not in ("raise", "flag"):
