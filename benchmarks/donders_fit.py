@@ -23,6 +23,20 @@ SciPy: 1 start; defaults ``--sizes 1 10 100 1000 --scipy-budget 240``)::
         1000         0.0    242.35       242.3        4.13      138     0.993
     (1000: compile 0.0 = the 16-subject chunk's executable reused)
 
+Idle re-run 2026-12-02 01:25–01:35 UTC after the layout changes (load 1.2–1.6), ``--sizes 1000
+--scipy-subjects 2``::
+
+    SciPy loop: 69.4 s/subject over 2 subjects (nfev 42, 38; 33.3 s/subject on 2026-11-22)
+    subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
+        1000        17.9    399.87       399.9        2.50      174     0.993
+    floor: equilibria cost 170.7 ms/subject at each start's own steps (mean 19.1), 422.3 ms/subject
+    at the chunk's slowest start (mean 48.4)
+
+174× the SciPy loop in the same run (target ≥ 138× kept). Both sides ran slower than on
+2026-11-22 (JAX 400 vs 242 ms/subject, SciPy 69 vs 33 s/subject): the machine, not the code,
+since the same-run ratio rose. The fit costs 2.3× the equilibria at each start's own step count
+and 0.95× the bound set by each chunk's slowest start.
+
 Re-run 2026-12-01 18:10–18:50 UTC after the shared Newton solver (``pmpjax._base.newton``) and
 the ``Status`` codes replaced the equilibria's own loop, on the same machine shared by 7 sessions
 (load average 18–21 throughout; every figure is inflated ~20–30× and only same-run ratios mean

@@ -25,6 +25,12 @@ not the code: baseline 0.140 subjects/s, 1 core 128.9, 1 device 75.8, 2 devices 
 922x); compile + first run 80–86 s; real data 123 s / 167 s. Rerun on an idle machine to refresh
 the table below (the ≥ 1 600x of issue 13 is the idle figure; the code path it times is unchanged).
 
+Idle re-run 2026-12-02 01:23 UTC (after the layout changes: IK weights flatten their batch with the
+shared ``flatten_batch``; load 1.2 → 1.4): baseline 0.697 subjects/s (this run's SciPy loop was
+slower than on 11-22), 1 core 623, 1 device 1218, 2 devices 1043 subjects/s: **1748×** (1 core
+894×); compile + first run 4.9 s; weights agree with the baseline to 1.4e-13; batch scaling B = 1:
+187, 10: 615, 100: 1190, 1000: 1400 subjects/s; real data point estimate 9.3 s, bootstrap 8.4 s.
+
 Figures on an idle machine (2026-11-22, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, float64,
 jax 0.10.2; shared machine, load average 1.8 at start and 1.5 at end):
 
