@@ -39,7 +39,6 @@ from ._config import read_config as read_config
 
 # Data
 from ._data.hugmp import hugmp_directory as hugmp_directory
-from ._pmp import simulate as _simulate
 
 # λ0-PMP kernels: one equilibrium (no checks, vmappable), the RK4 integrator, the one weighted
 # pseudo-inverse in its diagonal-weight SoA forms
@@ -47,6 +46,9 @@ from ._pmp.equilibria import equilibrium_one as equilibrium_one
 from ._pmp.integrate import integrate as integrate
 from ._pmp.redundancy import pinv_apply_diag_soa as pinv_apply_diag_soa
 from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
+
+# simulate's RK4 step check, for callers that trace simulate inside their own kernels (skipped there)
+from ._pmp.simulate import check_rk4_stability as check_rk4_stability
 
 # Springy arm: argument checks and the per-item gravity equilibrium
 from ._springy_arm.arm import check_arm as check_arm
@@ -62,7 +64,3 @@ from ._wrist.pointing import drop_trials as drop_trials
 from ._wrist.pointing import model_grid as model_grid
 from ._wrist.pointing import normalised_movements as normalised_movements
 from ._wrist.pointing import trial_problems as trial_problems
-
-#: ``check_rk4_stability(model, planner, q0, batch, h)``: ``simulate``'s RK4 step check (raises
-#: ``ValueError``), for callers that trace ``simulate`` inside their own kernels, where it is skipped.
-check_rk4_stability = _simulate._check_stability

@@ -121,7 +121,7 @@ def _rates(model, q0, *, batch):
     return lam, g
 
 
-def _check_stability(model, planner, q0, batch, h):
+def check_rk4_stability(model, planner, q0, batch, h):
     """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
     lam, g_null = (np.asarray(v) for v in _rates(model, q0, batch=batch))
     if np.any(lam[..., 0] <= 0):
@@ -187,7 +187,7 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         # Concrete inputs inside a caller's jit/vmap/grad: evaluate the check eagerly instead of
         # tracing it (its jitted rate estimate would otherwise return tracers).
         with jax.ensure_compile_time_eval():
-            _check_stability(model, planner, q0, batch, max(sched.hs))
+            check_rk4_stability(model, planner, q0, batch, max(sched.hs))
     # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
     h = sched.hs[0] if len(set(sched.hs)) == 1 else None
     kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
