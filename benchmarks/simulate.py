@@ -140,6 +140,7 @@ import resource
 import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -473,6 +474,10 @@ def save_calls(B):
     vmapped = jax.jit(jax.vmap(lambda q, x: _effort(sim(q, x, pj.SaveAt()))))
     calls["loss, batched call (jit)"] = ("every step", lambda: jax.block_until_ready(batched(q0, xd)))
     calls["loss, vmap of single calls (jit)"] = ("every step", lambda: jax.block_until_ready(vmapped(q0, xd)))
+    c_rk4 = bl.build_c()
+    if c_rk4 is not None:
+        q0n, xdn = np.asarray(q0), np.asarray(xd)
+        calls["C scalar loop, 1 core"] = ("final", lambda: c_rk4(q0n, xdn))
     return calls
 
 
@@ -504,27 +509,55 @@ def bench_saves(B, repeats):
             r = res[k]
             r["s"], r["cpu_s"] = min(r.get("s", np.inf), t), min(r.get("cpu_s", np.inf), c1 - c0)
             r["minflt"] = min(r.get("minflt", np.inf), f1 - f0)
+    c_rate = res.get("C scalar loop, 1 core", {}).get("s")
     for r in res.values():
         r["compile_s"] = r["first_call_s"] - r["s"]
         r["steps_per_s"] = B * bl.N_STEPS / r["s"]
         r["vs_final"], r["cpu_vs_final"] = r["s"] / res["final"]["s"], r["cpu_s"] / res["final"]["cpu_s"]
+        r["vs_c_loop"] = c_rate / r["s"] if c_rate else None
     diff = float(np.max(np.abs(vals["loss, vmap of single calls (jit)"] - vals["loss, batched call (jit)"])))
     return res, diff
 
 
-def main_saves(B, repeats, out):
+HUGEPAGES = "glibc.malloc.hugetlb=1"
+
+
+def _saves_table(B, rows, title):
+    L = [f"| {title} (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × C loop | page faults |",
+         "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for k, r in rows.items():
+        vc = f"{r['vs_c_loop']:.2f}" if r.get("vs_c_loop") else ""
+        comp = "" if k.startswith("C ") else f"{r['compile_s']:.1f}"
+        L.append(f"| {k} | {r['save']} | {comp} | {r['s'] * 1e3:.0f} ms | {r['cpu_s'] * 1e3:.0f} ms | "
+                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {vc} | {r['minflt'] / 1e3:.0f} k |")
+    return L
+
+
+def main_saves(B, repeats, out, child=False):
+    """Save-mode rows in this process, then (unless ``child``) the same rows in a child process
+    whose large allocations use transparent huge pages (``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``,
+    glibc ≥ 2.35): XLA's CPU buffers come from ``malloc``, so the fresh every-step output then costs
+    hundreds instead of ~90 k page faults."""
     load0 = os.getloadavg()
-    print(f"pmpjax simulate save modes — B = {B}, {bl.machine()}, jax {jax.__version__}, load {load0[0]:.2f}",
-          flush=True)
+    print(f"pmpjax simulate save modes — B = {B}, {bl.machine()}, jax {jax.__version__}, load {load0[0]:.2f}, "
+          f"GLIBC_TUNABLES={os.environ.get('GLIBC_TUNABLES', '')!r}", flush=True)
     rows, diff = bench_saves(B, repeats)
     res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": bl.machine(),
            "jax": jax.__version__, "B": B, "pmpjax": os.path.dirname(pj.__file__), "rows": rows,
+           "glibc_tunables": os.environ.get("GLIBC_TUNABLES", ""),
            "max_abs_diff_vmap_vs_batched_loss": diff, "load_avg_start": load0, "load_avg_end": os.getloadavg()}
-    L = [f"| what (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |",
-         "|---|---|---:|---:|---:|---:|---:|---:|"]
-    for k, r in rows.items():
-        L.append(f"| {k} | {r['save']} | {r['compile_s']:.1f} | {r['s'] * 1e3:.0f} ms | {r['cpu_s'] * 1e3:.0f} ms | "
-                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {r['minflt'] / 1e3:.0f} k |")
+    if child:
+        return res
+    L = _saves_table(B, rows, "default allocator")
+    if HUGEPAGES not in os.environ.get("GLIBC_TUNABLES", ""):
+        tmp = os.path.join(tempfile.mkdtemp(prefix="pmpjax_saves_"), "child.json")
+        tun = ":".join(t for t in (os.environ.get("GLIBC_TUNABLES"), HUGEPAGES) if t)
+        spawn(["--saves", "--saves-B", str(B), "--saves-out", tmp, "--saves-repeats", str(repeats), "--saves-child"],
+              env={"GLIBC_TUNABLES": tun})
+        with open(tmp) as f:
+            res["hugepages"] = json.load(f)
+        L += ["", *_saves_table(B, res["hugepages"]["rows"], "huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1)")]
+        res["load_avg_end"] = os.getloadavg()
     L.append(f"\nvmap-of-single-calls loss vs batched loss: max |Δ| = {diff:.1e}. "
              f"Load average {load0[0]:.1f} → {res['load_avg_end'][0]:.1f}.")
     print("\n" + "\n".join(L))
@@ -544,6 +577,8 @@ if __name__ == "__main__":
                     help="only the save-mode rows (every step, every 10, ts, final, vmap of a user's call)")
     ap.add_argument("--saves-B", type=int, default=10_000, help="batch size of --saves (default 10000)")
     ap.add_argument("--saves-out", help="JSON path of --saves (default results/simulate_saves.json)")
+    ap.add_argument("--saves-repeats", type=int, default=3, help="interleaved rounds of --saves (default 3)")
+    ap.add_argument("--saves-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--worker", choices=["memory", "pinned", "sharded"], help=argparse.SUPPRESS)
     ap.add_argument("--B", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--save", default="final", help=argparse.SUPPRESS)
@@ -555,8 +590,12 @@ if __name__ == "__main__":
         print(json.dumps(worker_pinned(a.B, 3)))
     elif a.worker == "sharded":
         print(json.dumps(worker_sharded(a.B, 3, a.out)))
+    elif a.saves and a.saves_child:
+        with open(a.saves_out, "w") as f:
+            json.dump(main_saves(a.saves_B, a.saves_repeats, None, child=True), f)
+        print("{}")
     elif a.saves:
-        main_saves(1000 if a.quick else a.saves_B, 2 if a.quick else 3,
+        main_saves(1000 if a.quick else a.saves_B, 2 if a.quick else a.saves_repeats,
                    a.saves_out or (None if a.quick else "default"))
     else:
         main(a.quick)
