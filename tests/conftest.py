@@ -55,7 +55,15 @@ def pytest_unconfigure(config):
 # hands whole files to the workers in collection order (xdist would otherwise sort them by number
 # of tests): longest first keeps the two workers even to the end instead of leaving one long file
 # to run alone. Files not listed follow in their usual order.
-SLOWEST_FIRST = ()
+SLOWEST_FIRST = (
+    "test_pointing.py", "test_donders.py", "test_reaching.py", "test_jit_safety.py", "test_ik_weights.py",
+    "test_simulate.py", "test_springy_rollout_gradient.py", "test_notebook_pointing.py", "test_main_job_parts.py",
+    "test_commands.py", "test_notebook_donders.py", "test_springy_rollouts.py", "test_springy_reflexes.py",
+    "test_primitives.py", "test_notebook_sweeps.py", "test_notebook_ik_weights.py", "test_primitives_fits.py",
+    "test_notebook_lambda0_pmp.py", "test_equilibria.py", "test_cli.py", "test_ik_data.py",
+    "test_primitives_part.py", "test_models.py", "test_kinematics.py", "test_compilation_cache.py",
+    "test_sweep.py", "test_sweep_command.py", "test_notebook_fit_your_own_data.py",
+)
 
 
 def pytest_collection_modifyitems(config, items):
