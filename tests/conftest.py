@@ -51,10 +51,15 @@ def pytest_unconfigure(config):
             os.environ.pop(key, None)
 
 
-# Test files, longest first (per-file sums of `--durations=0`, see the README). `--dist loadfile`
-# hands whole files to the workers in collection order (xdist would otherwise sort them by number
-# of tests): longest first keeps the two workers even to the end instead of leaving one long file
-# to run alone. Files not listed follow in their usual order.
+# Test files, longest first. `--dist loadfile` hands whole files to the workers in collection order
+# (xdist would otherwise sort them by number of tests, which put the single-test notebooks and the
+# springy gradient last): longest first keeps the two workers even to the end instead of leaving
+# one long file to run alone. Files not listed follow in their usual order. Per-file sums of
+# `--durations=0` [s], 2026-12-02, 2 cores at load 5-9 (other jobs): pointing 485, donders 342,
+# reaching 299, jit_safety 272, springy_rollout_gradient 187-218, notebook_donders 142,
+# springy_rollouts 122, springy_reflexes 109, primitives 108, primitives_fits 90, commands 62; the
+# rest from the idle run of 2026-12-01 (simulate 131, ik_weights 150, ...), the notebooks' and
+# main-job parts' files by their parts' compile times.
 SLOWEST_FIRST = (
     "test_pointing.py", "test_donders.py", "test_reaching.py", "test_jit_safety.py", "test_ik_weights.py",
     "test_simulate.py", "test_springy_rollout_gradient.py", "test_notebook_pointing.py", "test_main_job_parts.py",
