@@ -1,7 +1,7 @@
-"""Independent references for the springy-arm tests (test_primitives.py,
-test_springy_reflexes.py, test_springy_rollouts.py): plain C MuJoCo ``mj_step`` loops (spring torque
-in ``qfrc_applied``), settled C rollouts for statics, central differences, the paper's
-minimum-jerk velocity formula. (Each test file defines its own module-scoped arm fixtures.)"""
+"""Independent references for the springy-arm tests (test_primitives*.py, test_springy_*.py):
+plain C MuJoCo ``mj_step`` loops (spring torque in ``qfrc_applied``), settled C rollouts for
+statics, central differences, the paper's minimum-jerk velocity formula. (The arm fixtures are
+module-scoped, in conftest.py.)"""
 
 import _reference
 import mujoco

@@ -1,31 +1,79 @@
-"""Test configuration: float64, strict rank promotion, shared problems."""
+"""Test configuration: float64, strict rank promotion, one compilation cache per run, shared
+fixtures."""
+
+import os
+import shutil
+import tempfile
 
 import jax
+import numpy as np
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
 
-def _shared_compilation_cache() -> None:
-    """One persistent compilation cache per test run, shared by the xdist workers (a function that
-    two test files compile, e.g. a test module and its notebook, is compiled once). Fresh every
-    run, so every run measures cold compilation as CI does."""
-    import os
-    import tempfile
-    import uuid
+CACHE_ENV = "PMPJAX_TEST_CACHE_DIR"
+_CREATED = []  # the directory this process made (the controller), removed when the run ends
 
-    run = os.environ.get("PYTEST_XDIST_TESTRUNUID") or uuid.uuid4().hex
-    path = os.path.join(tempfile.gettempdir(), f"pmpjax-test-jax-cache-{run}")
-    os.makedirs(path, exist_ok=True)
+
+def _cache_env(path):
+    return {"JAX_COMPILATION_CACHE_DIR": path, "PMPJAX_CACHE_DIR": path,
+            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0.5", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+
+
+def pytest_configure(config):
+    """One persistent JAX compilation cache per test run, shared by everything the run starts: the
+    controller makes a temporary directory and exports it before the xdist workers and the
+    subprocess tests start, so a function that two test files, two workers, or a test and its
+    subprocess compile is compiled once. Fresh every run (every run measures cold compilation, as
+    CI does) and removed at the end; ``PMPJAX_TEST_CACHE_DIR=dir`` keeps one across runs instead,
+    ``JAX_ENABLE_COMPILATION_CACHE=false`` turns it off."""
+    path = os.environ.get(CACHE_ENV)
+    if not path:  # the controller (or a run without xdist): workers inherit the environment
+        path = tempfile.mkdtemp(prefix="pmpjax-test-jax-cache-")
+        _CREATED.append(path)
+        os.environ[CACHE_ENV] = path
+    # Fresh interpreters started by tests read these at `import jax`; the command line's
+    # enable_compilation_cache() reads PMPJAX_CACHE_DIR (never the user's ~/.cache here).
+    os.environ.update(_cache_env(path))
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    if hasattr(config.option, "loadscopereorder"):  # xdist: keep SLOWEST_FIRST's order of files
+        config.option.loadscopereorder = False
 
 
-_shared_compilation_cache()
+def pytest_unconfigure(config):
+    for path in _CREATED:
+        shutil.rmtree(path, ignore_errors=True)
+        for key in (CACHE_ENV, *_cache_env(path)):
+            os.environ.pop(key, None)
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+
+# Test files, longest first. `--dist loadfile` hands whole files to the workers in collection order
+# (xdist would otherwise sort them by number of tests, which put the single-test notebooks and the
+# springy gradient last): longest first keeps the two workers even to the end instead of leaving
+# one long file to run alone. Files not listed follow in their usual order. Per-file sums of
+# `--durations=0` [s], 2026-12-02, 2 cores at load 5-9 (other jobs): pointing 485, donders 342,
+# reaching 299, jit_safety 272, springy_rollout_gradient 187-218, notebook_donders 142,
+# springy_rollouts 122, springy_reflexes 109, primitives 108, primitives_fits 90, commands 62; the
+# rest from the idle run of 2026-12-01 (simulate 131, ik_weights 150, ...), the notebooks' and
+# main-job parts' files by their parts' compile times.
+SLOWEST_FIRST = (
+    "test_pointing.py", "test_donders.py", "test_reaching.py", "test_jit_safety.py", "test_ik_weights.py",
+    "test_simulate.py", "test_springy_rollout_gradient.py", "test_notebook_pointing.py", "test_main_job_parts.py",
+    "test_commands.py", "test_notebook_donders.py", "test_springy_rollouts.py", "test_springy_reflexes.py",
+    "test_primitives.py", "test_notebook_sweeps.py", "test_notebook_ik_weights.py", "test_primitives_fits.py",
+    "test_notebook_lambda0_pmp.py", "test_equilibria.py", "test_cli.py", "test_ik_data.py",
+    "test_primitives_part.py", "test_models.py", "test_kinematics.py", "test_compilation_cache.py",
+    "test_sweep.py", "test_sweep_command.py", "test_notebook_fit_your_own_data.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: order within a file kept
 
 
 @pytest.fixture
@@ -33,7 +81,7 @@ def rng():
     return np.random.default_rng(0)
 
 
-# Springy-arm fixtures (test_primitives.py, test_springy_*.py): one arm per test module.
+# Springy-arm fixtures (test_primitives*.py, test_springy_*.py): one arm per test module.
 @pytest.fixture(scope="module")
 def arm():
     import pmpjax as pj
