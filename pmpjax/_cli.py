@@ -240,14 +240,15 @@ def default_jobs() -> int:
 
 def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: bool = False,
               only: Iterable[str] | None = None, seed: int = 0, progress: bool = True,
-              cache: bool = True, jobs: int | None = None) -> dict:
+              cache: bool = True, jobs: int | None = 1) -> dict:
     """Run the main job's parts into ``out``; returns the ``results.json`` content.
 
-    ``jobs`` worker processes (default :func:`default_jobs`) run the parts, longest first (their
-    previous ``seconds`` in ``results.json``, else :data:`PART_SECONDS`); XLA compiles mostly on
-    one thread, so two parts compiling at once use two cores. ``jobs=1``, or a single part to run,
-    runs in this process. Parts given to workers must be importable (module-level functions or
-    entry points); a worker that crashes fails its part, the others still run.
+    ``jobs`` > 1 (``None``: :func:`default_jobs`, the command line's default) spawns that many
+    worker processes that run the parts, longest first (their previous ``seconds`` in
+    ``results.json``, else :data:`PART_SECONDS`); XLA compiles mostly on one thread, so two parts
+    compiling at once use two cores. ``jobs=1`` (the default here), or a single part to run, runs
+    in this process. Parts given to workers must be importable (module-level functions or entry
+    points); a worker that crashes fails its part, the others still run.
     """
     import jax
 
