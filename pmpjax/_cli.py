@@ -181,7 +181,10 @@ def available_parts() -> dict[str, Callable]:
 
 
 def _load(part):
-    return part.load() if hasattr(part, "load") else part
+    """The part's function from an entry point, a ``module:attr`` string (workers) or itself."""
+    if hasattr(part, "load"):
+        return part.load()
+    return _resolve(part)
 
 
 def _call_part(fn, ctx: PartContext) -> dict:

@@ -94,7 +94,11 @@ def _tiny_part(ctx):
 
 
 def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, monkeypatch):
-    parts = {"raising": _raising_part, "crashing": _crashing_part, "tiny": _tiny_part}
+    from importlib.metadata import EntryPoint
+
+    # "tiny" as an installed package registers it (pmpjax.jobs entry point): the worker loads it.
+    tiny = EntryPoint(name="tiny", value=f"{__name__}:_tiny_part", group="pmpjax.jobs")
+    parts = {"raising": _raising_part, "crashing": _crashing_part, "tiny": tiny}
     monkeypatch.setattr(_cli, "available_parts", lambda: parts)
     res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
     assert res["_meta"]["jobs"] == 2
