@@ -63,7 +63,9 @@ class PartContext:
         self._progress_factory = progress_factory
 
     def log(self, msg: str) -> None:
-        self._console.print(f"[bold cyan]{self.name}[/]: {msg}", highlight=False)
+        from rich.markup import escape
+
+        self._console.print(f"[bold cyan]{self.name}[/]: {escape(msg)}", highlight=False)
 
     def progress(self, iterable: Iterable, *, total: int | None = None, description: str = ""):
         return self._progress_factory(iterable, total=total, description=f"{self.name}: {description}")
@@ -334,7 +336,9 @@ def _run_part(name: str, part, ctx: PartContext) -> dict:
     except Exception as e:  # a failing part is reported; the others still run
         (ctx.out / f"{name}.error.txt").write_text(traceback.format_exc())
         entry.update(status="failed", error=f"{type(e).__name__}: {e}")
-        ctx._console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {e} "  # noqa: SLF001
+        from rich.markup import escape
+
+        ctx._console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))} "  # noqa: SLF001
                            f"(traceback in {ctx.out / (name + '.error.txt')})")
     entry["seconds"] = round(time.perf_counter() - t0, 2)
     entry["artefacts"] = [dataclasses.asdict(a) for a in ctx.artefacts]
@@ -427,6 +431,8 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
+    from rich.markup import escape
+
     ctx = mp.get_context("spawn")
     log_dir = out / "_logs"
     log_dir.mkdir(exist_ok=True)
@@ -473,7 +479,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
                             entry = {"quick": quick, "status": "failed", "error": f"{type(e).__name__}: {e}",
                                      "seconds": round(time.perf_counter() - t_start[name], 2), "artefacts": [],
                                      "doc": ""}
-                            ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {e}")
+                            ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))}")
                         ui.finished(name)
                         record(name, entry)
                     if broken:
