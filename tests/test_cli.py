@@ -88,6 +88,7 @@ def _crashing_part(ctx):
 
 def _tiny_part(ctx):
     """Writes one table."""
+    assert list(ctx.progress(range(3), description="steps")) == [0, 1, 2]
     ctx.table([{"pid": os.getpid(), "quick": ctx.quick}], "tiny.csv", "One row.")
     ctx.log("tiny done")
     return {"value": 1.5}
