@@ -469,6 +469,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
                                      initargs=(queue, cache_dir and str(cache_dir), str(log_dir))) as ex:
                 futs = {}
                 for name in batch:
+                    ui.submitted(name)
                     t_start.setdefault(name, time.perf_counter())
                     futs[ex.submit(_worker_run, name, _portable(parts[name]), str(out), quick, seed)] = name
                 waiting = set(futs)
@@ -541,12 +542,16 @@ class _UI:
     the progress bars of loops inside parts (``ctx.progress``; from workers over a queue)."""
 
     def __init__(self, enabled: bool):
+        import threading
+
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         self.console = Console(stderr=True)
         self.enabled = enabled
+        self._lock = threading.RLock()  # (the pump thread and the main thread both change the tasks)
         self._tasks: dict[str, object] = {}
+        self._done: set[str] = set()  # (a late "start" from the queue must not bring back a finished part)
         self._inner: dict[str, tuple[str, object]] = {}
         if enabled:
             self._prog = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
@@ -558,21 +563,29 @@ class _UI:
             return iterable
         return self._prog.track(iterable, total=total, description=description)
 
+    def submitted(self, name: str) -> None:
+        with self._lock:
+            self._done.discard(name)
+
     def started(self, name: str) -> None:
-        if self.enabled and name not in self._tasks:
-            self._tasks[name] = self._prog.add_task(f"[bold cyan]{name}[/] running", total=None)
+        with self._lock:
+            if self.enabled and name not in self._tasks and name not in self._done:
+                self._tasks[name] = self._prog.add_task(f"[bold cyan]{name}[/] running", total=None)
 
     def finished(self, name: str) -> None:
         if not self.enabled:
             return
-        task = self._tasks.pop(name, None)
-        if task is not None:
-            self._prog.remove_task(task)
-        for key in [k for k, (part, _) in self._inner.items() if part == name]:
-            self._prog.remove_task(self._inner.pop(key)[1])
+        with self._lock:
+            self._done.add(name)
+            task = self._tasks.pop(name, None)
+            if task is not None:
+                self._prog.remove_task(task)
+            for key in [k for k, (part, _) in self._inner.items() if part == name]:
+                self._prog.remove_task(self._inner.pop(key)[1])
 
     @contextlib.contextmanager
     def running(self, name: str):
+        self.submitted(name)
         self.started(name)
         try:
             yield
@@ -593,19 +606,22 @@ class _UI:
             if kind == "start":
                 started[msg[1]] = msg[2]
                 self.started(msg[1])
-            elif kind == "log":
-                self.console.print(msg[1], highlight=False)
-            elif not self.enabled:
                 continue
-            elif kind == "progress":
-                key, part, description, done, total = msg[1:]
-                if part not in self._tasks:
-                    continue  # (the part has finished meanwhile)
-                if key not in self._inner:
-                    self._inner[key] = (part, self._prog.add_task(description, total=total))
-                self._prog.update(self._inner[key][1], completed=done)
-            elif kind == "progress_end" and msg[1] in self._inner:
-                self._prog.remove_task(self._inner.pop(msg[1])[1])
+            if kind == "log":
+                self.console.print(msg[1], highlight=False)
+                continue
+            if not self.enabled:
+                continue
+            with self._lock:
+                if kind == "progress":
+                    key, part, description, done, total = msg[1:]
+                    if part not in self._tasks:
+                        continue  # (the part has finished meanwhile)
+                    if key not in self._inner:
+                        self._inner[key] = (part, self._prog.add_task(description, total=total))
+                    self._prog.update(self._inner[key][1], completed=done)
+                elif kind == "progress_end" and msg[1] in self._inner:
+                    self._prog.remove_task(self._inner.pop(msg[1])[1])
 
     def close(self) -> None:
         if self.enabled:
