@@ -261,8 +261,9 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
 
     Measured (``--quick``, 2-core AMD EPYC Zen 4 KVM, 2026-12-02, cores shared with two other jobs,
     load 5–9): cold ``--no-cache`` ``jobs=2`` 782 s wall / 512 s user CPU; warm cache ``--force``
-    ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s (no gain when the cores are busy). Idle,
-    ``jobs=1``, cold: 320 s / 413 s (README "The two commands").
+    ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s; four parts cold at load 3–4: ``jobs=1``
+    74 s / 76 s, ``jobs=2`` 99 s / 96 s (one process already uses more than one core; a second
+    worker on two busy cores only adds its start-up). Idle, ``jobs=1``, cold: 320 s / 413 s.
     """
     import jax
 
