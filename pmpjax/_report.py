@@ -81,9 +81,13 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
                         table += f"<p>… {more} more rows in <a href='{a['path']}'>{a['path']}</a></p>"
                 body.append(f"<div class='table'>{cap}<p><a href='{html.escape(a['path'])}'>"
                             f"{html.escape(a['path'])}</a></p>{table}</div>")
-    md += ["", "## Run", "", f"Seed {meta.get('seed')}, quick = {meta.get('quick')}.", ""]
+    run = f"Seed {meta.get('seed')}, quick = {meta.get('quick')}"
+    if "wall_seconds" in meta:
+        run += f"; the last run took {meta['wall_seconds']} s wall time with {meta.get('jobs', 1)} worker process(es)"
+    run += "."
+    md += ["", "## Run", "", run, ""]
     md += [f"- {k}: {v}" for k, v in meta.get("versions", {}).items()]
-    body.append("<h2>Run</h2><p>" + html.escape(f"Seed {meta.get('seed')}, quick = {meta.get('quick')}.")
+    body.append("<h2>Run</h2><p>" + html.escape(run)
                 + "</p><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>"
                                        for k, v in meta.get("versions", {}).items()) + "</ul>")
     md_path, html_path = out / "report.md", out / "report.html"

@@ -18,7 +18,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
-    res = _cli.reproduce(out, quick=True, only=["figure3", "figure4"], progress=False, cache=False)
+    res = _cli.reproduce(out, quick=True, only=["figure3", "figure4"], progress=False, cache=False, jobs=1)
     return out, res
 
 
@@ -67,11 +67,69 @@ def test_a_failing_part_is_reported_and_the_others_run(tmp_path, monkeypatch):
 
     parts = {"broken": broken, "figure4": _cli.figure4_part}
     monkeypatch.setattr(_cli, "available_parts", lambda: parts)
-    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False)
+    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
     assert res["broken"]["status"] == "failed" and "boom" in res["broken"]["error"]
     assert "RuntimeError" in (tmp_path / "broken.error.txt").read_text()
     assert res["figure4"]["status"] == "ok"
     assert "Failed" in (tmp_path / "report.html").read_text()
+
+
+# Parts for the worker-process tests: module-level, so that spawned workers can import them.
+def _raising_part(ctx):
+    """Raises."""
+    raise RuntimeError("boom in a worker")
+
+
+def _crashing_part(ctx):
+    """Kills its worker process (as a segfault in XLA or MuJoCo would)."""
+    time.sleep(1.0)  # (after _raising_part has been taken by the other worker)
+    os._exit(3)
+
+
+def _tiny_part(ctx):
+    """Writes one table."""
+    assert list(ctx.progress(range(3), description="steps")) == [0, 1, 2]
+    ctx.table([{"pid": os.getpid(), "quick": ctx.quick}], "tiny.csv", "One row.")
+    ctx.log("tiny done")
+    return {"value": 1.5}
+
+
+def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    # "tiny" as an installed package registers it (pmpjax.jobs entry point): the worker loads it.
+    tiny = EntryPoint(name="tiny", value=f"{__name__}:_tiny_part", group="pmpjax.jobs")
+    parts = {"raising": _raising_part, "crashing": _crashing_part, "tiny": tiny}
+    monkeypatch.setattr(_cli, "available_parts", lambda: parts)
+    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    assert res["_meta"]["jobs"] == 2
+    assert res["raising"]["status"] == "failed" and "boom in a worker" in res["raising"]["error"]
+    assert "RuntimeError" in (tmp_path / "raising.error.txt").read_text()
+    assert res["crashing"]["status"] == "failed" and "crashed" in res["crashing"]["error"]
+    assert res["tiny"]["status"] == "ok" and res["tiny"]["results"] == {"value": 1.5}
+    row = (tmp_path / "tiny.csv").read_text().splitlines()[1]
+    assert int(row.split(",")[0]) != os.getpid()  # it ran in a worker
+    assert list(res) == ["_meta", "raising", "crashing", "tiny"]  # report order, not finishing order
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("Failed") >= 2 and "tiny.csv" in html
+
+
+def test_two_workers_give_the_numbers_of_one_process(run_dir, tmp_path, monkeypatch):
+    import jax
+
+    out, res1 = run_dir
+    # Workers load what the in-process fixture compiled from the suite's cache (conftest): a worker
+    # without float64 would miss the cache and differ in the last bits.
+    monkeypatch.setenv("PMPJAX_CACHE_DIR", jax.config.jax_compilation_cache_dir)
+    min_time = jax.config.jax_persistent_cache_min_compile_time_secs
+    try:
+        res2 = _cli.reproduce(tmp_path, quick=True, only=["figure3", "figure4"], progress=False, jobs=2)
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", min_time)
+    assert res2["_meta"]["jobs"] == 2
+    for part in ("figure3", "figure4"):
+        assert res2[part]["status"] == "ok"
+        assert res2[part]["results"] == json.loads(json.dumps(res1[part]["results"])), part
 
 
 def test_an_interrupted_run_keeps_the_parts_already_written(tmp_path):
