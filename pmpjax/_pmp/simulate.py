@@ -207,6 +207,7 @@ def _kernel(**statics):
     ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``).
     """
     run = partial(_run, **statics)
+    run_jvp = partial(_run, **{**statics, "stage_loop": True})
 
     @jax.custom_batching.custom_vmap
     def batched(*args):
@@ -222,7 +223,7 @@ def _kernel(**statics):
 
     @kernel.defjvp
     def _jvp(primals, tangents):
-        return jax.jvp(run, primals, tangents)
+        return jax.jvp(run_jvp, primals, tangents)
 
     return kernel
 
@@ -274,9 +275,10 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 _BLOCK = 16
 
 
-@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single"))
+@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single",
+                                   "stage_loop"))
 def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-         single):
+         single, stage_loop=False):
     """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
     n, m = chain.n, chain.m
@@ -323,9 +325,11 @@ def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_ini
             # written at row 0 (one sample at a time) and overwritten by segment 1's.
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block)
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
+                                             stage_loop=stage_loop)
         else:
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None)
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
+                                             stage_loop=stage_loop)
         obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
         return (qc, acc), None
