@@ -61,7 +61,7 @@ def _stages_loop(g, t, y, h, args):
         ks, obs = carry
         c = cs[i] * h
         prev = tm(lambda k: k[jnp.maximum(i - 1, 0)], ks)
-        yi = tm(lambda u, v: jnp.where(i == 0, u, u + c * v), y, prev)
+        yi = tm(lambda u, v: u + c * v, y, prev)  # stage 1: c = 0 and prev = 0
         k, o = g(t + c, yi, args)
         ks = tm(lambda a, b: a.at[i].set(b), ks, k)
         obs = tm(lambda a, b: jnp.where(i == 0, b, a), obs, o)

@@ -204,7 +204,11 @@ def _kernel(**statics):
     every stage reads strided component slices and writes one trajectory at a time. The
     ``custom_vmap`` rule instead folds the mapped axis into the run's own (trailing, contiguous)
     batch. ``custom_vmap`` has no derivative rules, so derivatives go through ``custom_jvp`` with
-    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``).
+    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``), taken of the
+    variant that loops over the four RK4 stages (``stage_loop``): the field and its tangent then
+    appear once per step in the graph instead of four times, which cuts the compile time of every
+    derivative through ``simulate`` (fits, ``jax.grad``) with the same run time at their sizes
+    (benchmarks/compile_times.py). Primal-only calls keep the unrolled stages (faster at large B).
     """
     run = partial(_run, **statics)
     run_jvp = partial(_run, **{**statics, "stage_loop": True})
