@@ -13,7 +13,8 @@ steps of size ``hs[i]``. :func:`integrate` records ``save(t, y)`` at the end of 
 stacked scan outputs (simple; one extra field evaluation per sample). :func:`integrate_observed`
 (``simulate``) lets the field return an observation of the state it is evaluated at and hands the
 observations of segment starts, in blocks, to a ``write`` that puts them in place: with one step
-per segment they come from RK4's first stage at no extra cost.
+per segment they come from RK4's first stage at no extra cost. ``stage_loop=True`` evaluates the
+four stages in a loop (the field traced once; ``simulate`` uses it for derivatives only).
 """
 
 from __future__ import annotations
