@@ -150,8 +150,9 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     Starts at the paper's ``τ = τ0 = T/5`` (T: the subject's mean duration, or the movement's).
     Returns a :class:`TimeConstantFit`; items without data get status TOO_FEW_DATA and NaN.
 
-    **Compile time:** ≈ 39 s on first use (LM through ``simulate`` of every movement with forward-
-    mode derivatives); ≈ 1 s to run 2 subjects × 3 trials (benchmarks/compile_times.py).
+    **Compile time:** ≈ 20 s on first use on an idle 2-core CPU (LM through ``simulate`` of every
+    movement with forward-mode derivatives: ≈ 9 s tracing, the rest XLA); ≈ 1 s to run 2 subjects
+    × 3 trials (benchmarks/compile_times.py).
     """
     KJ, q_rest = _check_params(analysis, KJ, q_rest)
     check_positive_int("max_steps", max_steps)

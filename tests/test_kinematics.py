@@ -20,6 +20,11 @@ def test_sincos_matches_numpy():
     assert np.max(np.abs(np.asarray(c) - np.cos(x))) < 5e-16
     g = jax.vmap(jax.grad(lambda v: sincos(v)[0]))(jnp.asarray(x[:1000]))
     np.testing.assert_allclose(g, np.cos(x[:1000]), atol=5e-16)
+    # the tangent rule: d cos = −sin dx, and second derivatives through it (d² sin = −sin)
+    gc = jax.vmap(jax.grad(lambda v: sincos(v)[1]))(jnp.asarray(x[:1000]))
+    np.testing.assert_allclose(gc, -np.sin(x[:1000]), atol=5e-16)
+    g2 = jax.vmap(jax.grad(jax.grad(lambda v: sincos(v)[0])))(jnp.asarray(x[:1000]))
+    np.testing.assert_allclose(g2, -np.sin(x[:1000]), atol=5e-16)
     assert np.isnan(np.asarray(sincos(jnp.array([np.nan, np.inf]))[0])).all()
 
 

@@ -13,7 +13,8 @@ steps of size ``hs[i]``. :func:`integrate` records ``save(t, y)`` at the end of 
 stacked scan outputs (simple; one extra field evaluation per sample). :func:`integrate_observed`
 (``simulate``) lets the field return an observation of the state it is evaluated at and hands the
 observations of segment starts, in blocks, to a ``write`` that puts them in place: with one step
-per segment they come from RK4's first stage at no extra cost.
+per segment they come from RK4's first stage at no extra cost. ``stage_loop=True`` evaluates the
+four stages in a loop (the field traced once; ``simulate`` uses it for derivatives only).
 """
 
 from __future__ import annotations
@@ -26,22 +27,50 @@ import jax.numpy as jnp
 from jax import lax
 
 
-def rk4_step(f: Callable, t, y, h, args, *, observed: bool = False):
+def rk4_step(f: Callable, t, y, h, args, *, observed: bool = False, stage_loop: bool = False):
     """One classical Runge–Kutta step of ``ẏ = f(t, y, args)`` for pytree ``y``.
 
     With ``observed=True`` ``f`` returns ``(ẏ, obs)`` and the step returns ``(y_next, obs)``, the
     observation of its first stage, i.e. of ``(t, y)`` (the other stages' are dead code).
+    ``stage_loop``: evaluate the four stages in a ``fori_loop`` (``f`` appears once in the graph
+    instead of four times: smaller compiled graphs, slower runs at large batches).
     """
     g = f if observed else (lambda t_, y_, a_: (f(t_, y_, a_), None))
     add = lambda a, b, c: jax.tree_util.tree_map(lambda u, v: u + c * v, a, b)  # noqa: E731
-    k1, obs = g(t, y, args)
-    k2 = g(t + 0.5 * h, add(y, k1, 0.5 * h), args)[0]
-    k3 = g(t + 0.5 * h, add(y, k2, 0.5 * h), args)[0]
-    k4 = g(t + h, add(y, k3, h), args)[0]
+    if stage_loop:
+        k1, k2, k3, k4, obs = _stages_loop(g, t, y, h, args)
+    else:
+        k1, obs = g(t, y, args)
+        k2 = g(t + 0.5 * h, add(y, k1, 0.5 * h), args)[0]
+        k3 = g(t + 0.5 * h, add(y, k2, 0.5 * h), args)[0]
+        k4 = g(t + h, add(y, k3, h), args)[0]
     y_next = jax.tree_util.tree_map(
         lambda y_, a, b, c, d: y_ + (h / 6.0) * (a + 2.0 * (b + c) + d), y, k1, k2, k3, k4
     )
     return (y_next, obs) if observed else y_next
+
+
+def _stages_loop(g, t, y, h, args):
+    """The four RK4 stages ``k1..k4`` and stage 1's observation, ``g`` traced once."""
+    tm = jax.tree_util.tree_map
+    kz = tm(jnp.zeros_like, y)
+    obs0 = tm(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(g, t, y, args)[1])
+    ks0 = tm(lambda z: jnp.stack([z] * 4), kz)
+    cs = jnp.array([0.0, 0.5, 0.5, 1.0], dtype=jnp.result_type(float))
+
+    def stage(i, carry):
+        ks, obs = carry
+        c = cs[i] * h
+        prev = tm(lambda k: k[jnp.maximum(i - 1, 0)], ks)
+        yi = tm(lambda u, v: u + c * v, y, prev)  # stage 1: c = 0 and prev = 0
+        k, o = g(t + c, yi, args)
+        ks = tm(lambda a, b: a.at[i].set(b), ks, k)
+        obs = tm(lambda a, b: jnp.where(i == 0, b, a), obs, o)
+        return ks, obs
+
+    ks, obs = lax.fori_loop(0, 4, stage, (ks0, obs0))
+    k1, k2, k3, k4 = (tm(lambda k, j=j: k[j], ks) for j in range(4))
+    return k1, k2, k3, k4, obs
 
 
 def integrate(
@@ -70,7 +99,7 @@ def integrate(
 
 def integrate_observed(
     f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, acc: Any, write: Callable | None, *,
-    block: int = 1, unroll: int = 1,
+    block: int = 1, unroll: int = 1, stage_loop: bool = False,
 ):
     """Integrate ``ẏ = f(t, y, args)[0]`` over consecutive segments, observing their starts.
 
@@ -87,7 +116,7 @@ def integrate_observed(
     that reverse mode stores no per-segment copy of ``acc``.
     """
     # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
-    step = jax.checkpoint(lambda t, y, h: rk4_step(f, t, y, h, args, observed=True))
+    step = jax.checkpoint(lambda t, y, h: rk4_step(f, t, y, h, args, observed=True, stage_loop=stage_loop))
     observe = jax.checkpoint(lambda t, y: f(t, y, args)[1])
 
     def run_steps(y, t0, h):

@@ -204,9 +204,14 @@ def _kernel(**statics):
     every stage reads strided component slices and writes one trajectory at a time. The
     ``custom_vmap`` rule instead folds the mapped axis into the run's own (trailing, contiguous)
     batch. ``custom_vmap`` has no derivative rules, so derivatives go through ``custom_jvp`` with
-    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``).
+    ``_run``'s own JVP (linear in the tangents, hence transposable for ``grad``), taken of the
+    variant that loops over the four RK4 stages (``stage_loop``): the field and its tangent then
+    appear once per step in the graph instead of four times, which cuts the compile time of every
+    derivative through ``simulate`` (fits, ``jax.grad``) with the same run time at their sizes
+    (benchmarks/compile_times.py). Primal-only calls keep the unrolled stages (faster at large B).
     """
     run = partial(_run, **statics)
+    run_jvp = partial(_run, **{**statics, "stage_loop": True})
 
     @jax.custom_batching.custom_vmap
     def batched(*args):
@@ -222,7 +227,7 @@ def _kernel(**statics):
 
     @kernel.defjvp
     def _jvp(primals, tangents):
-        return jax.jvp(run, primals, tangents)
+        return jax.jvp(run_jvp, primals, tangents)
 
     return kernel
 
@@ -257,8 +262,8 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
 
     **Compile time:** the first call with a new batch shape, ``duration``/``dt``, ``saveat`` or
-    model type compiles the whole RK4 scan: ≈ 5 s on a 2-core CPU at the Figure-3 size, ≈ 23 s for
-    ``jax.grad`` through it (benchmarks/compile_times.py). Later calls reuse it; turn on JAX's
+    model type compiles the whole RK4 scan: ≈ 5 s on a 2-core CPU at the Figure-3 size, ≈ 12 s for
+    ``jax.grad`` through it (idle; benchmarks/compile_times.py). Later calls reuse it; turn on JAX's
     persistent compilation cache (``jax_compilation_cache_dir``; the command line does) to keep it
     across processes.
     """
@@ -274,9 +279,10 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 _BLOCK = 16
 
 
-@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single"))
+@partial(jax.jit, static_argnames=("h", "batch", "n_steps", "include_initial", "singular_tol", "single",
+                                   "stage_loop"))
 def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-         single):
+         single, stage_loop=False):
     """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
     n, m = chain.n, chain.m
@@ -323,9 +329,11 @@ def _run(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_ini
             # written at row 0 (one sample at a time) and overwritten by segment 1's.
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block)
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
+                                             stage_loop=stage_loop)
         else:
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None)
+            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
+                                             stage_loop=stage_loop)
         obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
         return (qc, acc), None
