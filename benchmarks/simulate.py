@@ -163,25 +163,27 @@ class _Captured(Exception):
 
 
 def capture_run(q0, xd, save):
-    """Arguments ``simulate`` passes to the jitted ``_simulate._run`` (captured, not executed)."""
+    """The jitted ``_simulate._run`` and the arguments and static options ``simulate`` gives the
+    kernel that wraps it (captured by a stand-in ``_kernel``, not executed)."""
     model, planner = bl.jax_problem()
     box = {}
-    orig = _simulate._run
+    orig = _simulate._kernel
 
-    def fake(*args, **kwargs):
-        box["args"], box["kwargs"] = args, kwargs
-        raise _Captured
+    def fake_kernel(**statics):
+        def kernel(*args):
+            box["args"], box["kwargs"] = args, statics
+            raise _Captured
 
-    _simulate._run = fake
-    _simulate._kernel.cache_clear()  # kernels bind `_run` when built
+        return kernel
+
+    _simulate._kernel = fake_kernel
     try:
         pj.simulate(model, planner, q0, xd, duration=bl.DURATION, dt=bl.DT, saveat=SAVES[save])
     except _Captured:
         pass
     finally:
-        _simulate._run = orig
-        _simulate._kernel.cache_clear()
-    return orig, box["args"], box["kwargs"]
+        _simulate._kernel = orig
+    return _simulate._run, box["args"], box["kwargs"]
 
 
 def public_call(q0, xd, save):
