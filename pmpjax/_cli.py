@@ -259,11 +259,10 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     in this process. Parts given to workers must be importable (module-level functions or entry
     points); a worker that crashes fails its part, the others still run.
 
-    Measured (``--quick``, 2-core AMD EPYC Zen 4 KVM, 2026-12-02, cores shared with two other jobs,
-    load 5–9): cold ``--no-cache`` ``jobs=2`` 782 s wall / 512 s user CPU; warm cache ``--force``
-    ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s; four parts cold at load 3–4: ``jobs=1``
-    74 s / 76 s, ``jobs=2`` 99 s / 96 s (one process already uses more than one core; a second
-    worker on two busy cores only adds its start-up). Idle, ``jobs=1``, cold: 320 s / 413 s.
+    Measured (``--quick``, cold ``--no-cache``, 2-core AMD EPYC Zen 4 KVM, 2026-12-02): idle,
+    ``jobs=2`` 228 s wall / 420 s user CPU, ``jobs=1`` 299 s / 387 s. On cores shared with other
+    jobs (load 5–9) a second worker gains nothing (cold ``jobs=2`` 782 s / 512 s; warm cache
+    ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s): one process already uses more than one core.
     """
     import jax
 
