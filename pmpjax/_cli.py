@@ -454,11 +454,16 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
     suspects: list[str] = []
     t_start: dict[str, float] = {}
 
+    def failed(name, error, doc=""):
+        """The entry of a part that ended without its worker's entry."""
+        return {"quick": quick, "status": "failed", "error": error,
+                "seconds": round(time.perf_counter() - t_start.get(name, time.perf_counter()), 2),
+                "artefacts": [], "doc": doc}
+
     def crashed(name):
         ui.console.print(f"[bold red]{name}: FAILED[/] its worker process crashed (messages in {log_dir})")
-        return {"quick": quick, "status": "failed", "error": f"worker process crashed (messages in {log_dir})",
-                "seconds": round(time.perf_counter() - t_start.get(name, time.perf_counter()), 2),
-                "artefacts": [], "doc": (inspect.getdoc(_resolve(_portable(parts[name]))) or "").split("\n\n")[0]}
+        return failed(name, f"worker process crashed (messages in {log_dir})",
+                      (inspect.getdoc(_resolve(_portable(parts[name]))) or "").split("\n\n")[0])
 
     try:
         while pending or suspects:
@@ -486,9 +491,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
                             continue
                         except Exception as e:  # (the part could not be sent or its results not returned)
                             (out / f"{name}.error.txt").write_text(traceback.format_exc())
-                            entry = {"quick": quick, "status": "failed", "error": f"{type(e).__name__}: {e}",
-                                     "seconds": round(time.perf_counter() - t_start[name], 2), "artefacts": [],
-                                     "doc": ""}
+                            entry = failed(name, f"{type(e).__name__}: {e}")
                             ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))}")
                         ui.finished(name)
                         record(name, entry)
