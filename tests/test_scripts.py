@@ -3,6 +3,7 @@
 import ast
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,3 +40,28 @@ def test_simulate_benchmark_captures_concrete_kernel_arguments():
     assert leaves and not any(isinstance(a, jax.core.Tracer) for a in leaves)
     assert kwargs["batch"] == (3,)
     run.trace(*args, **kwargs)  # traces with these arguments (no compile)
+
+
+def test_simulate_benchmark_sharded_worker_runs_on_two_devices(tmp_path):
+    """``benchmarks/simulate.py``'s two-device worker (GSPMD and shard_map) runs and gives the final
+    postures of SciPy's solve_ivp (the benchmark's NumPy field) on the same wrist movements; it
+    crashed on JAX's default Explicit mesh axes and on shard_map's varying-axes check."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    B, out = 4, tmp_path / "q.npy"
+    env = {**os.environ, "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"}
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "simulate.py"), "--worker", "sharded",
+                           "--B", str(B), "--out", str(out)], capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert res["max_diff_gspmd_vs_shard_map"] < 1e-12
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import _baselines as bl
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    ref = bl.scipy_final(bl.start_postures(B), bl.targets(B), rtol=1e-11, atol=1e-12)[0]  # NumPy field
+    np.testing.assert_allclose(np.load(out), ref, atol=1e-8)
