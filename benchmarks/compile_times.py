@@ -61,6 +61,11 @@ StableHLO 9.5 k → 7.3 k lines; run 1.0 → 1.3 CPU s (the primal is repeated p
 third of that compile (20.1 s without it). ``--xla_backend_optimization_level=0``: compile 16.5 s
 but the run 18.7 s instead of 1.3 s; for ``simulate``'s kernel at B = 128, 250 steps: compile
 7.5 → 4.7 CPU s, run 0.02 → 0.43 s (``--xla_llvm_disable_expensive_passes``: no gain).
+``pointing --quick`` now fits Donders sessions of 300 postures (the full run's), so its NIO fit
+has ``donders_nio``'s compiled shapes: ``reproduce --quick --only donders_nio pointing --jobs 2``
+with a fresh cache, wall 225.5 → 186.4 s (pointing 207 → 171 s; load 5–6); alone
+(``--only pointing``, jobs 1, no cache) 112 → 116 s at load 4–5 (it then compiles the larger
+fit and a 1024-row equilibrium batch itself).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
