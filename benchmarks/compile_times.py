@@ -47,6 +47,25 @@ end-to-end compile column does not resolve it: before 22.6, 22.8, 18.1 s, after 
 21.4 s (tracing, ≈ 9 s, is unchanged; machine noise is ±25 %). ``grad_simulate`` 11.5 → 12.0 s,
 run times and B = 10 000 final-only ``simulate`` (1.0 s) unchanged within noise. The LM loop
 already traces the residual and its Jacobian once (``fitting._optimise``).
+
+Session 7 (2026-12-02 05:45–06:30 UTC, machine shared, load 5–7: CPU seconds of this process,
+``time.process_time``, of ``_fit_items.trace/lower/compile`` at the ``--quick`` pointing size,
+A/B in alternating fresh processes). ``least_squares`` now takes its Jacobians inside
+``pmpjax.internal.forward_jacobians``: ``simulate``'s JVP is a ``custom_vmap`` whose batching rule
+folds the tangent axis of ``jacfwd`` and the fit's ``vmap`` over items into the run's own batch, so
+the nested RK4 scans are traced once at the product batch instead of being batched to a fixed
+point per ``vmap`` level; and the residual is traced once (its jaxpr replayed in the loop, no
+``eval_shape``). ``fit_time_constants``: tracing 9.8 → 6.5 CPU s, XLA compile 27.2 → 21.5 CPU s,
+StableHLO 9.5 k → 7.3 k lines; run 1.0 → 1.3 CPU s (the primal is repeated per tangent: cheap for
+2 parameters). Same optimum to 1e-15. ``_profiles`` (the analysis of the model movements) is a
+third of that compile (20.1 s without it). ``--xla_backend_optimization_level=0``: compile 16.5 s
+but the run 18.7 s instead of 1.3 s; for ``simulate``'s kernel at B = 128, 250 steps: compile
+7.5 → 4.7 CPU s, run 0.02 → 0.43 s (``--xla_llvm_disable_expensive_passes``: no gain).
+``pointing --quick`` now fits Donders sessions of 300 postures (the full run's), so its NIO fit
+has ``donders_nio``'s compiled shapes: ``reproduce --quick --only donders_nio pointing --jobs 2``
+with a fresh cache, wall 225.5 → 186.4 s (pointing 207 → 171 s; load 5–6); alone
+(``--only pointing``, jobs 1, no cache) 112 → 116 s at load 4–5 (it then compiles the larger
+fit and a 1024-row equilibrium batch itself).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)

@@ -276,9 +276,11 @@ def pointing(ctx) -> dict:
 
     # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
     # fitted time constants can be told apart.
-    # (--quick: two subjects, three trials, mild variability; the sizes of tests/test_pointing.py.)
+    # (--quick: two subjects, three trials, mild variability; the sizes of tests/test_pointing.py
+    # except the Donders sessions: 300 postures as in the full run, so that the NIO fit has
+    # donders_nio's shapes and reuses its compilation, in process or through the cache.)
     opts = dict(subjects=("subj1", "subj4"), n_trials=3, target_spread=0.0, duration_jitter=0.03,
-                param_jitter=0.03, n_donders=64) if ctx.quick else dict(n_trials=10)
+                param_jitter=0.03) if ctx.quick else dict(n_trials=10)
     ex = pj.synthetic_pointing_experiment(ctx.out / "pointing_data", tau0_ratio=0.3, tau_ratio=0.12,
                                           seed=ctx.seed, **opts)
     rec = pj.read_pointing(ex.files["pointing"])

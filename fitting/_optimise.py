@@ -22,12 +22,20 @@ for equilibria. Decision: keep this loop; no optimistix (nor optax) dependency.
 from __future__ import annotations
 
 import jax
+import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
 from pmpjax import Status
-from pmpjax.internal import as_array, check_positive, check_positive_int, is_concrete, pytree_dataclass
+from pmpjax.internal import (
+    as_array,
+    check_positive,
+    check_positive_int,
+    forward_jacobians,
+    is_concrete,
+    pytree_dataclass,
+)
 
 
 @pytree_dataclass
@@ -81,13 +89,18 @@ def least_squares(
 
     def lin(x):
         # One pass: the residual rides along as jacfwd's aux output (no second primal solve).
-        J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
+        # (simulate's JVP with the tangents folded into its batch: pmpjax.internal.forward_jacobians)
+        with forward_jacobians():
+            J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
         return r, J
 
-    r_shape = jax.eval_shape(lambda y: residual(y, args), x0)
+    # Traced once: the shapes come from this trace and the loop replays its jaxpr (a separate
+    # `eval_shape` of the residual would trace a simulation once more).
+    lin_jaxpr, (r_shape, _) = jax.make_jaxpr(lin, return_shape=True)(x0)
     if r_shape.ndim != 1:
         raise ValueError(f"`residual` must return a 1-D vector, got shape {r_shape.shape}")
     N, p = r_shape.shape[0], x0.shape[0]
+    lin = jax.extend.core.jaxpr_as_fun(lin_jaxpr)
     dtype = x0.dtype
     # The initial linearisation is the loop's first pass (`first`), so the residual and its
     # Jacobian appear once in the compiled graph (they dominate compile time for residuals that

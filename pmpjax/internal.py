@@ -49,6 +49,7 @@ from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
 
 # simulate's RK4 step check, for callers that trace simulate inside their own kernels (skipped there)
 from ._pmp.simulate import check_rk4_stability as check_rk4_stability
+from ._pmp.simulate import forward_jacobians as forward_jacobians
 
 # Springy arm: argument checks and the per-item gravity equilibrium
 from ._springy_arm.arm import check_arm as check_arm

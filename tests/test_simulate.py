@@ -308,3 +308,32 @@ def test_planar_arm_and_user_chain():
     with pytest.raises(ValueError, match="target"):
         pj.simulate(pj.Lambda0PMP(pj.PlanarArm(L), KJ=KJ, q_rest=q_rest, W=KJ), planner, q_rest,
                     np.array([1.0, 0.0]), **kw)
+
+
+def test_folded_forward_jacobians_match_central_differences():
+    """``forward_jacobians`` (tangent and vmapped axes folded into simulate's batch, as in
+    ``fitting.least_squares``): jacfwd in (τ0, τ) under vmap over movements with their own
+    targets, against central differences of the plain primal."""
+    from pmpjax.internal import forward_jacobians
+
+    q0 = QREST_S2 + np.array([0.05, 0.0, 0.05])
+    targets = jnp.stack([jnp.asarray(TG["NW"]), jnp.asarray(TG["E"])])
+    kw = dict(duration=0.2, dt=2e-3, saveat=pj.SaveAt(final=True))
+
+    def final(theta, target):
+        model = pj.Lambda0PMP(CHAIN, KJ=KJ_S2, q_rest=QREST_S2, W=theta[0] * KJ_S2)
+        tr = pj.simulate(model, pj.ArimotoPlanner(k=None, tau=theta[1], tau0=theta[0]), q0, target, **kw)
+        return jnp.concatenate([tr.q[-1], tr.xdot[-1]])
+
+    def jac(thetas):
+        with forward_jacobians():
+            return jax.vmap(jax.jacfwd(final))(thetas, targets)
+
+    thetas = jnp.array([[0.08, 0.06], [0.1, 0.05]])
+    J = np.asarray(jax.jit(jac)(thetas))
+    f = jax.jit(jax.vmap(final))
+    for i in range(2):
+        e = np.zeros((2, 2))
+        e[:, i] = 1e-6
+        fd = (np.asarray(f(thetas + e, targets)) - np.asarray(f(thetas - e, targets))) / 2e-6
+        np.testing.assert_allclose(J[..., i], fd, rtol=1e-5, atol=1e-7)

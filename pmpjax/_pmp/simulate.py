@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import functools
 import math
@@ -227,9 +229,91 @@ def _kernel(**statics):
 
     @kernel.defjvp
     def _jvp(primals, tangents):
+        if _FOLD_TANGENTS.get():
+            return _kernel_jvp(**statics)(primals, tangents)
         return jax.jvp(run_jvp, primals, tangents)
 
     return kernel
+
+
+#: Set (at trace time) by :func:`forward_jacobians`.
+_FOLD_TANGENTS = contextvars.ContextVar("pmpjax_fold_tangents", default=False)
+
+
+@contextlib.contextmanager
+def forward_jacobians():
+    """Trace forward-mode Jacobians (``jax.jacfwd``, also under ``jax.vmap``) through ``simulate``
+    with the tangent and mapped axes folded into the run's own batch (``_kernel_jvp``).
+
+    Plain ``vmap`` of the JVP batches the nested RK4 scans (each ``vmap`` level retraces them to
+    a fixed point), which dominates tracing and compile time of fits with Jacobians through
+    ``simulate``. Folded, one JVP of the kernel runs at the product batch (the primal is repeated
+    per tangent: cheap for the few parameters of a fit). The result is forward-mode only (no
+    ``grad`` or second derivatives of what is traced inside); ``fitting.least_squares`` uses it
+    for its Jacobians."""
+    token = _FOLD_TANGENTS.set(True)
+    try:
+        yield
+    finally:
+        _FOLD_TANGENTS.reset(token)
+
+
+@functools.lru_cache(maxsize=256)
+def _kernel_jvp(**statics):
+    """``(primals, tangents) -> jvp of _run`` whose ``vmap`` folds the mapped axis into the batch."""
+    run_jvp = partial(_run, **{**statics, "stage_loop": True})
+
+    @jax.custom_batching.custom_vmap
+    def jvp(primals, tangents):
+        return jax.jvp(run_jvp, primals, tangents)
+
+    @jvp.def_vmap
+    def _rule(axis_size, in_batched, primals, tangents):
+        pb, tb = in_batched
+        plain = any(jax.tree_util.tree_leaves((pb[0].chain, pb[4:], tb[0].chain, tb[4:])))
+        if plain:  # a mapped chain or time grid: plain vmap of the JVP
+            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb))
+            out = jax.vmap(lambda p, t: jax.jvp(run_jvp, p, t), in_axes=axes)(primals, tangents)
+            return out, jax.tree_util.tree_map(lambda _: True, out)
+        batch = statics["batch"]
+
+        def lift(x, b, core):
+            if not b:
+                return x
+            return x.reshape(x.shape[:1] + (1,) * (len(batch) - (x.ndim - 1 - core)) + x.shape[1:])
+
+        def pair(p, t, b_p, b_t, core):
+            """Lift both to the new leading axis and broadcast them to one shape."""
+            if not (b_p or b_t):
+                return p, t
+            p, t = lift(p, b_p, core), lift(t, b_t, core)
+            shape = (axis_size,) + np.broadcast_shapes(p.shape[1:] if b_p else p.shape,
+                                                       t.shape[1:] if b_t else t.shape)
+            shape = np.broadcast_shapes(p.shape, t.shape, shape)
+            return jnp.broadcast_to(p, shape), jnp.broadcast_to(t, shape)
+
+        (mp, plp, q0p, tgp, t0p, hp), (mt, plt, q0t, tgt, t0t, ht) = primals, tangents
+        mods_p, mods_t = {}, {}
+        for k, c in (("W", 2), ("KJ", 2), ("q_rest", 1)):
+            if getattr(mp, k) is not None:
+                mods_p[k], mods_t[k] = pair(getattr(mp, k), getattr(mt, k), getattr(pb[0], k), getattr(tb[0], k), c)
+        mp, mt = replace(mp, **mods_p), replace(mt, **mods_t)
+        pl = jax.tree_util.tree_map(lambda p, t, bp, bt: pair(p, t, bp, bt, 0), plp, plt, pb[1], tb[1])
+        plp = jax.tree_util.tree_map(lambda p, x: x[0], plp, pl)
+        plt = jax.tree_util.tree_map(lambda p, x: x[1], plt, pl)
+        q0p, q0t = pair(q0p, q0t, pb[2], tb[2], 1)
+        tgp, tgt = pair(tgp, tgt, pb[3], tb[3], 2)
+        out = _kernel_jvp(**{**statics, "batch": (axis_size,) + batch})(
+            (mp, plp, q0p, tgp, t0p, hp), (mt, plt, q0t, tgt, t0t, ht))
+        flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
+        if any(jax.tree_util.tree_leaves(pb)):
+            return out, (flags, flags)
+        # Unmapped primals (e.g. jax.jacfwd's basis vmap): the primal is the same in every lane.
+        primal = replace(out[0], **{k: getattr(out[0], k)[0] for k in ("q", "x", "qdot", "xdot", "manipulability",
+                                                                        "status")})
+        return (primal, out[1]), (jax.tree_util.tree_map(lambda _: False, flags), flags)
+
+    return jvp
 
 
 def _vmap_rule(statics, axis_size, in_batched, args):
