@@ -85,7 +85,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import hugmp_directory, pad_rows
+from pmpjax.internal import bucket, hugmp_directory, pad_rows
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints
@@ -347,11 +347,18 @@ def _stage2_start(theta1, cfg: _Config):
 # the model on normalised time
 
 
+def _tau0_W(p: dict, t_ratio):
+    """Normalised ``τ0`` (B,) and ``W = τ0 W̃`` (B, 4, 4) for motions with ``T/T_rec`` = ``t_ratio``
+    (NumPy for NumPy ``p``, else JAX)."""
+    xp = np if all(isinstance(v, np.ndarray) for v in (p["tau0"], p["W"], t_ratio)) else jnp
+    tau0 = p["tau0"] * t_ratio  # (B,) normalised
+    return tau0, tau0[..., None, None] * xp.broadcast_to(p["W"], tau0.shape + (4, 4))
+
+
 def _model_and_planner(p: dict, t_ratio, cfg: _Config):
     """λ0-PMP and planner for motions with ``T/T_rec`` = ``t_ratio`` (B,); ``p`` per subject
     (or with a leading (B,) axis per motion). Also returns the normalised ``τ0`` (B,) and ``W``."""
-    tau0 = p["tau0"] * t_ratio  # (B,) normalised
-    W = tau0[..., None, None] * jnp.broadcast_to(p["W"], tau0.shape + (4, 4))
+    tau0, W = _tau0_W(p, t_ratio)
     model = pj.Lambda0PMP(_chain(), KJ=p["KJ"], q_rest=p["q_rest"], W=W)
     if cfg.model == "lambda0":
         planner = pj.ArimotoPlanner(k=None, tau=p["tau"] * t_ratio, tau0=tau0)
@@ -376,6 +383,21 @@ def _rates(KJ, W, tau0, q0, *, minjerk: bool):
 
 
 _rates_jit = jax.jit(_rates, static_argnames=("minjerk",))
+_unpack_jit = jax.jit(_unpack, static_argnums=1)
+
+
+@partial(jax.jit, static_argnums=1)
+def _unpack_rows(theta, cfg: _Config, elbow) -> dict:
+    """:func:`_unpack` of rows ``theta`` (B, p), ``elbow`` (B,) in one compiled call."""
+    return jax.vmap(lambda th, e: _unpack(th, cfg, e))(theta, elbow)
+
+
+@partial(jax.jit, static_argnames=("cfg",))
+def _theta_rates(theta, elbow, t_ratio, q0, cfg: _Config):
+    """:func:`_rates` of motions (R,) at the parameters ``theta`` (p,) (one compiled call)."""
+    p = _unpack(theta, cfg, elbow)
+    tau0, W = _tau0_W(p, t_ratio)
+    return _rates(p["KJ"], W, tau0, q0, minjerk=cfg.model != "lambda0")
 
 
 def _simulate(model, planner, q0, target, steps: int):
@@ -481,11 +503,9 @@ def _steps_for(theta, elbow, motions: list[_Motions], cfg: _Config, minimum: int
     for th, e, m in zip(theta, elbow, motions):
         if not np.all(np.isfinite(th)):
             continue
-        p = _unpack(jnp.asarray(th), cfg, e)
-        t_ratio = jnp.asarray(m.t_ratio)
-        _, _, tau0, W = _model_and_planner(p, t_ratio, cfg)
-        rates.append(np.asarray(_rates_jit(p["KJ"], W, tau0, jnp.asarray(m.q_obs[:, 0]),
-                                           minjerk=cfg.model != "lambda0")))
+        R = bucket(len(m.t_ratio), minimum=64)  # (padded with copies of a row: same maximum)
+        rates.append(np.asarray(_theta_rates(th, e, pad_rows(np.asarray(m.t_ratio, float), R),
+                                             pad_rows(np.asarray(m.q_obs[:, 0], float), R), cfg)))
     return _stability_steps(np.concatenate(rates) if rates else np.zeros(1), minimum)
 
 
@@ -858,7 +878,7 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
             continue
         k = order.index(name)
         x = out["x"][k]
-        pars = {key: np.asarray(v) for key, v in _unpack(jnp.asarray(x), cfg, out["elbow"][k]).items()}
+        pars = {key: np.asarray(v) for key, v in _unpack_jit(jnp.asarray(x), cfg, out["elbow"][k]).items()}
         n = int(out["n_residuals"][k])
         cost = float(out["cost"][k])
         res["KJ"][a], res["q_rest"][a], res["W"][a] = pars["KJ"], pars["q_rest"], pars["W"]
@@ -934,8 +954,8 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
     """Simulate rows (R,) with a step count that keeps RK4 well inside its stability bound;
     returns ``q`` (R, 50, 4), ``x`` (R, 50, 3), ``status`` (R,) as ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
-    KJ = model.KJ if model.KJ is not None else jnp.zeros_like(model.W)
-    tau0 = planner.tau0 if not minjerk else jnp.ones(len(q0))
+    KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
+    tau0 = planner.tau0 if not minjerk else np.ones(len(q0))
     rates = np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk))
     steps = _stability_steps(rates, min_steps)
     # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
@@ -959,7 +979,7 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
 def _concat(a, b):
     """Rows of two models (or planners) of one kind in one batch; shared scalars (the chain's
     lengths) stay as they are."""
-    return jax.tree_util.tree_map(lambda u, v: u if np.ndim(u) == 0 else jnp.concatenate([u, v]), a, b)
+    return jax.tree_util.tree_map(lambda u, v: u if np.ndim(u) == 0 else np.concatenate([u, v]), a, b)
 
 
 def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction:
@@ -1014,8 +1034,7 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
 
     # the fitted model, one parameter set per row, and the unfitted λ0-PMP (KJ = I, q_rest = mean
     # posture, τ = τ0 = T/5): one batch when they share the planner, so one compilation
-    p = {k: np.asarray(v) for k, v in jax.vmap(lambda th, e: _unpack(th, cfg, e))(
-        jnp.asarray(fit.params[own]), jnp.asarray(fit.q_rest[own, 3])).items()}
+    p = {k: np.asarray(v) for k, v in _unpack_rows(fit.params[own], cfg, fit.q_rest[own, 3]).items()}
     model, planner, _, _ = _model_and_planner(p, t_ratio, cfg)
     eye = np.broadcast_to(np.eye(4), (Bp, 4, 4))
     tau0_u = 0.2 * t_ratio

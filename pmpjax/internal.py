@@ -9,6 +9,7 @@ part of the stable API — names here may change between releases without deprec
 # Leading batch axes and padding (pmpjax/_base/batching.py)
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
+from ._base.batching import on_host as on_host
 from ._base.batching import pad_rows as pad_rows
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first

@@ -9,6 +9,7 @@ static. How to write your own chain: see :class:`Chain`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -91,14 +92,14 @@ class Chain:
     def fk(self, q):
         """Task position ``x`` (..., m) of joint angles ``q`` (..., n) [rad]."""
         q = as_array("q", q, tail=(self.n,))
-        return self._per_item(0, jnp.asarray(q))
+        return _per_item(self, 0, jnp.asarray(q))
 
     fk._batched = True
 
     def jacobian(self, q):
         """Task Jacobian ``∂fk/∂q`` (..., m, n) at ``q`` (..., n) (Eq 2)."""
         q = as_array("q", q, tail=(self.n,))
-        return self._per_item(1, jnp.asarray(q))
+        return _per_item(self, 1, jnp.asarray(q))
 
     jacobian._batched = True
 
@@ -131,6 +132,12 @@ def manipulability(chain: Chain, q):
         raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
     q = as_array("q", q, tail=(chain.n,))
     return manipulability_soa(chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1])
+
+
+@partial(jax.jit, static_argnums=1)
+def _per_item(chain, which: int, q):
+    """``fk`` (``which`` 0) or ``jacobian`` (1) of ``q`` (..., n) in one compiled call."""
+    return chain._per_item(which, q)
 
 
 def manipulability_soa(J):

@@ -122,8 +122,15 @@ def _rates(model, q0, *, batch):
 
 
 def check_rk4_stability(model, planner, q0, batch, h):
-    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
-    lam, g_null = (np.asarray(v) for v in _rates(model, q0, batch=batch))
+    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0.
+
+    Concrete ``model``, ``q0`` inside a caller's ``jit``/``vmap``/``grad`` are evaluated eagerly
+    (outside any trace no ``ensure_compile_time_eval``: it would compile each constant op apart)."""
+    rates = _rates(model, q0, batch=batch)
+    if not is_concrete(rates):
+        with jax.ensure_compile_time_eval():
+            rates = _rates(model, q0, batch=batch)
+    lam, g_null = (np.asarray(v) for v in rates)
     if np.any(lam[..., 0] <= 0):
         raise ValueError("`q0` is at a singular posture: J W⁻¹ Jᵀ is not positive definite")
     g = planner.max_gain()
@@ -184,10 +191,7 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
     if is_concrete(model, planner, q0):
-        # Concrete inputs inside a caller's jit/vmap/grad: evaluate the check eagerly instead of
-        # tracing it (its jitted rate estimate would otherwise return tracers).
-        with jax.ensure_compile_time_eval():
-            check_rk4_stability(model, planner, q0, batch, max(sched.hs))
+        check_rk4_stability(model, planner, q0, batch, max(sched.hs))
     # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
     h = sched.hs[0] if len(set(sched.hs)) == 1 else None
     kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
