@@ -56,6 +56,7 @@ from pmpjax.internal import (
     on_host,
     pad_rows,
     replace,
+    to_jax,
 )
 
 from ._optimise import covariance, least_squares
@@ -92,7 +93,7 @@ def _params_vector(name, v, n, size):
     """Shape checks (before tracing) of a parameter vector of an n-joint chain."""
     if int(n) != n or n < 2:
         raise ValueError(f"`n` must be an integer >= 2 (joints), got {n}")
-    v = jnp.asarray(as_array(name, v, tail=(size,)))
+    v = to_jax(as_array(name, v, tail=(size,)))
     if v.ndim != 1:
         raise ValueError(f"`{name}` must be a vector of shape ({size},) for n = {n}, got {v.shape}")
     return v

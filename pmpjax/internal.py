@@ -32,6 +32,7 @@ from ._base.validate import check_positive_int as check_positive_int
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import is_concrete as is_concrete
+from ._base.validate import to_jax as to_jax
 
 # Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
 from ._config import ConfigError as ConfigError

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass
+from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass, to_jax
 
 from .examples import _check_key
 from .weights import estimate_ik_weights
@@ -213,8 +213,8 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
     ``F = (N1 + N2 − p − 1) / (p (N1 + N2 − 2)) T² ~ F(p, N1 + N2 − p − 1)``). Drop variables that
     are constant in both conditions (e.g. weights fixed at 1) before calling: S must be invertible.
     """
-    a = jnp.asarray(as_array("a", a, tail=(None,)), dtype=float)
-    b = jnp.asarray(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
+    a = to_jax(as_array("a", a, tail=(None,)), dtype=float)
+    b = to_jax(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
     if a.ndim != 2 or b.ndim != 2:
         raise ValueError(f"`a` and `b` must be (N, p) matrices, got {a.shape} and {b.shape}")
     if not isinstance(paired, bool | np.bool_):

@@ -20,7 +20,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .validate import is_concrete
+from .validate import is_concrete, to_jax
 
 
 def broadcast_batch(**arrays: tuple[Any, int]) -> tuple[int, ...]:
@@ -42,7 +42,7 @@ def on_host(a, op):
     if not is_concrete(a):
         return op(a)
     out = op(np.asarray(a))
-    return out if isinstance(a, np.ndarray) else jnp.asarray(out)
+    return out if isinstance(a, np.ndarray) else to_jax(out)
 
 
 def flatten_batch(a, batch: tuple[int, ...], core: int, *, dtype=None, xp=jnp):
@@ -50,7 +50,7 @@ def flatten_batch(a, batch: tuple[int, ...], core: int, *, dtype=None, xp=jnp):
     (``xp=np`` for NumPy in and out, e.g. for C MuJoCo; with ``xp=jnp`` a concrete ``a`` is
     reshaped in NumPy and returned as a ``jax.Array``)."""
     if xp is jnp and is_concrete(a):
-        return jnp.asarray(flatten_batch(a, batch, core, dtype=dtype, xp=np))
+        return to_jax(flatten_batch(a, batch, core, dtype=dtype, xp=np))
     a = xp.asarray(a, dtype)
     core_shape = a.shape[a.ndim - core :]
     return xp.broadcast_to(a, batch + core_shape).reshape((math.prod(batch),) + core_shape)
@@ -78,7 +78,7 @@ def pad_rows(a, size: int, *, axis: int = 0, fill: str = "edge"):
     ``"zeros"`` appends zeros (for data whose padding is masked out). NumPy in, NumPy out;
     a concrete ``jax.Array`` is padded in NumPy and returned as a ``jax.Array``."""
     if not isinstance(a, np.ndarray) and is_concrete(a):
-        return jnp.asarray(pad_rows(np.asarray(a), size, axis=axis, fill=fill))
+        return to_jax(pad_rows(np.asarray(a), size, axis=axis, fill=fill))
     xp = np if isinstance(a, np.ndarray) else jnp
     n = a.shape[axis]
     if size < n:

@@ -37,7 +37,7 @@ from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, check_spd, is_concrete
+from .._base.validate import as_array, check_positive, check_positive_int, check_spd, is_concrete, to_jax
 from .._chains.kinematics import Chain
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
@@ -236,5 +236,5 @@ def equilibrium_posture(
         Bp = bucket(B, minimum=8)
         out = _flat_solve(chain, *(pad_rows(flatten_batch(a, batch, core, dtype=dtype), Bp) for a, core in args),
                           **opts)
-    q, lam, status, res, steps = (jnp.asarray(unflatten_batch(a, batch, B)) for a in out)
+    q, lam, status, res, steps = (to_jax(unflatten_batch(a, batch, B)) for a in out)
     return Equilibrium(q=q, lam=lam, status=status, kkt_residual=res, steps=steps)

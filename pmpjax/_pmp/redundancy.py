@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
-from .._base.validate import as_array, check_positive, check_spd
+from .._base.validate import as_array, check_positive, check_spd, to_jax
 
 
 def admittance_terms_soa(J, A):
@@ -74,10 +74,10 @@ def _check_weights(J, W, w):
     if (W is None) == (w is None):
         raise ValueError("give exactly one of `W` (..., n, n) or diagonal weights `w` (..., n)")
     if w is not None:
-        w = jnp.asarray(as_array("w", w, tail=(n,)))
+        w = to_jax(as_array("w", w, tail=(n,)))
         check_positive("w", w)
         return None, w
-    W = jnp.asarray(as_array("W", W, tail=(n, n)))
+    W = to_jax(as_array("W", W, tail=(n, n)))
     check_spd("W", W)
     return W, None
 
@@ -90,7 +90,7 @@ def _admittance(n, W, w):
 
 
 def _check_J(J):
-    J = jnp.asarray(as_array("J", J))
+    J = to_jax(as_array("J", J))
     if J.ndim < 2:
         raise ValueError(f"`J` must have shape (..., m, n), got {J.shape}")
     if J.shape[-2] > J.shape[-1]:
@@ -116,7 +116,7 @@ def _operator(which, J, W=None, w=None, tau_el=None):
     J = _check_J(J)
     W, w = _check_weights(J, W, w)
     if tau_el is not None:
-        tau_el = jnp.asarray(as_array("tau_el", tau_el, tail=(J.shape[-1],)))
+        tau_el = to_jax(as_array("tau_el", tau_el, tail=(J.shape[-1],)))
     return _operator_jit(which, J, W, w, tau_el)
 
 

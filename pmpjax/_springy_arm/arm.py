@@ -42,7 +42,7 @@ import numpy as np
 from .._base.batching import flatten_batch
 from .._base.mujoco import import_mjx, import_mujoco, load_spec
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive_int, is_concrete, to_jax
 from .._chains.mjcf import gravity_from_kinematics, kinematics
 
 JOINTS = ("sh_flex", "sh_abd", "sh_rot", "el_flex", "wr_flex", "wr_dev")
@@ -508,13 +508,13 @@ def run_controller(
     n = arm.n
     T = check_positive_int("n_steps", n_steps)
     K, B = check_gains(arm, arm.K if K is None else K, arm.B if B is None else B)
-    q0 = jnp.asarray(as_array("q0", arm.q_rest if q0 is None else q0, tail=(n,)), float)
-    qdot0 = jnp.asarray(as_array("qdot0", np.zeros(n) if qdot0 is None else qdot0, tail=(n,)), float)
-    q_set0 = q0 if q_set0 is None else jnp.asarray(as_array("q_set0", q_set0, tail=(n,)), float)
+    q0 = to_jax(as_array("q0", arm.q_rest if q0 is None else q0, tail=(n,)), float)
+    qdot0 = to_jax(as_array("qdot0", np.zeros(n) if qdot0 is None else qdot0, tail=(n,)), float)
+    q_set0 = q0 if q_set0 is None else to_jax(as_array("q_set0", q_set0, tail=(n,)), float)
     probe = np.broadcast_to(PROBE_PARK, (T, 3)) if probe is None else probe
     force = np.zeros((T, 3)) if force is None else force
-    probe = jnp.asarray(as_array("probe", probe, tail=(T, 3)), float)
-    force = jnp.asarray(as_array("force", force, tail=(T, 3)), float)
+    probe = to_jax(as_array("probe", probe, tail=(T, 3)), float)
+    force = to_jax(as_array("force", force, tail=(T, 3)), float)
     try:
         batch = tuple(
             np.broadcast_shapes(

@@ -22,7 +22,7 @@ from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive, check_positive_int, is_concrete, to_jax
 from .._chains.mjcf import MjcfChain, gravity_gradients, gravity_terms, site_position
 from .._pmp.redundancy import weighted_pinv
 from .arm import CogArm, check_arm
@@ -48,7 +48,7 @@ def default_primitives():
 
 def check_set_point(name: str, q_set, n: int):
     """``q_set`` (..., n) finite set-point(s) [rad]; raises ``ValueError`` naming ``name``."""
-    return jnp.asarray(as_array(name, q_set, tail=(n,)), float)
+    return to_jax(as_array(name, q_set, tail=(n,)), float)
 
 
 def check_stiffness(name: str, K, n: int):
@@ -76,7 +76,7 @@ def winner_take_all(scores, P):
     """Winner-take-all: the primitive ``P[argmax(scores)]`` (..., n) of ``P`` (k, n) for
     activation ``scores`` (..., k) — one primitive has control of the arm."""
     P = _check_primitives(P)
-    scores = jnp.asarray(as_array("scores", scores, tail=(P.shape[-2],)), float)
+    scores = to_jax(as_array("scores", scores, tail=(P.shape[-2],)), float)
     onehot = jax.nn.one_hot(jnp.argmax(scores, axis=-1), P.shape[-2], dtype=P.dtype)
     return jnp.einsum("...k,...kn->...n", onehot, P)
 
@@ -269,11 +269,11 @@ def moves_from_targets(start, targets, t0, duration) -> Moves:
     """Moves from ``start`` (n,) through ``targets`` (M, n) issued at times ``t0`` (M,) with
     durations ``duration`` (M,) [s] (scalars broadcast): each new move goes from the previous
     *target* to the new one (not from where the arm is), as on Cog."""
-    start = jnp.asarray(as_array("start", start, tail=(None,)), float)
+    start = to_jax(as_array("start", start, tail=(None,)), float)
     if start.ndim != 1:
         raise ValueError(f"`start` must be one set-point (n,), got shape {start.shape}")
     n = start.shape[-1]
-    targets = jnp.asarray(as_array("targets", targets, tail=(None, n)), float)
+    targets = to_jax(as_array("targets", targets, tail=(None, n)), float)
     if targets.ndim != 2:
         raise ValueError(f"`targets` must be (M, {n}), got shape {targets.shape}")
     M = targets.shape[-2]

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.validate import as_array
+from .._base.validate import as_array, to_jax
 
 
 def curvature_areas(path, start, end):
@@ -32,9 +32,9 @@ def curvature_areas(path, start, end):
 
 
 def _check_line(path, start, end):
-    path = jnp.asarray(as_array("path", path, tail=(None, 2)))
-    start = jnp.asarray(as_array("start", start, tail=(2,)))
-    end = jnp.asarray(as_array("end", end, tail=(2,)))
+    path = to_jax(as_array("path", path, tail=(None, 2)))
+    start = to_jax(as_array("start", start, tail=(2,)))
+    end = to_jax(as_array("end", end, tail=(2,)))
     if path.shape[-2] < 2:
         raise ValueError(f"`path` needs at least 2 samples, got shape {path.shape}")
     return path, start, end

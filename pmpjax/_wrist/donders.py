@@ -20,7 +20,7 @@ import numpy as np
 
 from .._base.batching import on_host
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_positive_int
+from .._base.validate import as_array, check_positive, check_positive_int, to_jax
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .orientation import rotvec_from_joint_angles
@@ -51,9 +51,9 @@ def _design(r_y, r_z):
 def evaluate_surface(coef, r_y, r_z):
     """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²`` [rad]; ``coef`` (..., 6), ``r_y``,
     ``r_z`` [rad] broadcast against ``coef[..., 0]``."""
-    coef = jnp.asarray(as_array("coef", coef, tail=(6,)))
-    r_y = jnp.asarray(as_array("r_y", r_y), coef.dtype)
-    r_z = jnp.asarray(as_array("r_z", r_z), coef.dtype)
+    coef = to_jax(as_array("coef", coef, tail=(6,)))
+    r_y = to_jax(as_array("r_y", r_y), coef.dtype)
+    r_z = to_jax(as_array("r_z", r_z), coef.dtype)
     return _evaluate(coef, r_y, r_z)
 
 
@@ -69,7 +69,7 @@ def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 
 
     Returns ``(r_y (n, n), r_z (n, n), r_x (..., n, n))``."""
     coef = surface_or_coef.coef if isinstance(surface_or_coef, DondersSurface) else surface_or_coef
-    coef = jnp.asarray(as_array("surface_or_coef", coef, tail=(6,)))
+    coef = to_jax(as_array("surface_or_coef", coef, tail=(6,)))
     check_positive("extent", extent)
     n = check_positive_int("n", n)
     return _surface_grid(coef, extent, n)
@@ -146,8 +146,8 @@ def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = No
     if np.ndim(pointing) != 2:
         raise ValueError(f"`pointing` must have shape (P, 2), got {np.shape(pointing)}")
     chain.check_target("pointing", pointing)
-    KJ = jnp.asarray(as_array("KJ", KJ, tail=(3, 3)))
-    q_rest = jnp.asarray(as_array("q_rest", q_rest, tail=(3,)))
+    KJ = to_jax(as_array("KJ", KJ, tail=(3, 3)))
+    q_rest = to_jax(as_array("q_rest", q_rest, tail=(3,)))
     KJ, q_rest = on_host(KJ, lambda a: a[..., None, :, :]), on_host(q_rest, lambda a: a[..., None, :])
     q = equilibrium_posture(chain, KJ, q_rest, pointing).q
     r = rotvec_from_joint_angles(q)

@@ -25,14 +25,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.validate import as_array, is_concrete
+from .._base.validate import as_array, is_concrete, to_jax
 from .._chains.kinematics import Wrist
 
 _WRIST = Wrist()
 
 
 def _arr(name, x, tail):
-    return jnp.asarray(as_array(name, x, tail=tail))
+    return to_jax(as_array(name, x, tail=tail))
 
 
 def _quat(name, quat):
