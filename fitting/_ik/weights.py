@@ -32,10 +32,13 @@ from pmpjax.internal import (
     flatten_batch,
     is_concrete,
     mv,
+    on_host,
     pinv_apply_diag_soa,
     pinv_diag_lists,
     pytree_dataclass,
+    to_jax,
     to_soa,
+    unflatten_batch,
 )
 
 from .._optimise import least_squares
@@ -468,13 +471,13 @@ def estimate_ik_weights(
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     batch = tuple(qdot.shape[:-2])
-    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    g = to_jax(np.asarray(gamma, float)) if is_concrete(gamma) else jnp.asarray(gamma, dtype=jnp.result_type(float))
     _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
     arrays = [flatten_batch(qdot, batch, 2), flatten_batch(xdot, batch, 2), flatten_batch(J, batch, 3),
-              np.ones((B, K), bool) if mask is None else mask.reshape(B, K),
-              jnp.broadcast_to(g, batch).reshape(B)]
+              np.ones((B, K), bool) if mask is None else on_host(mask, lambda a: a.reshape(B, K)),
+              flatten_batch(g, batch, 0)]
     if on_invalid not in ("raise", "flag"):
         raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
     concrete = is_concrete(*arrays)
@@ -508,15 +511,14 @@ def estimate_ik_weights(
         out = jax.device_put(out, mesh.devices.flat[0])
     if concrete:  # the device arrays may alias the caller's NumPy inputs: finish before returning
         out = jax.block_until_ready(out)
-    unflat = lambda a: a[:B].reshape(batch + a.shape[1:])  # noqa: E731
-    w, err, hist, iters, status, gam = (unflat(a) for a in out)
+    w, err, hist, iters, status, gam = (unflatten_batch(a, batch, B) for a in out)
     if flags is not None and flags.any():
-        fl = jnp.asarray(flags.reshape(batch))
-        status = jnp.where(fl, Status.INVALID_INPUT, status)
-        w = jnp.where(fl[..., None], jnp.nan, w)
-        err = jnp.where(fl, jnp.nan, err)
+        fl = flags.reshape(batch)  # (concrete: on the host)
+        status = to_jax(np.where(fl, np.asarray(Status.INVALID_INPUT, np.asarray(status).dtype), status))
+        w = to_jax(np.where(fl[..., None], np.nan, w))
+        err = to_jax(np.where(fl, np.nan, err))
     return IKWeightsResult(w=w, error=err, error_history=hist, iterations=iters,
-                           converged=status == Status.SUCCESSFUL, gamma=gam, status=status)
+                           converged=on_host(status, lambda s: s == Status.SUCCESSFUL), gamma=gam, status=status)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -653,19 +655,25 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     fixed_t = _fixed_mask(fixed, n)
     free = tuple(i for i in range(n) if not fixed_t[i])
     batch = tuple(qdot.shape[:-2])
-    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    g = to_jax(np.asarray(gamma, float)) if is_concrete(gamma) else jnp.asarray(gamma, dtype=jnp.result_type(float))
     _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    qf, xf, Jf = qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)), J.reshape((B, K) + tuple(J.shape[-2:]))
+    qf, xf, Jf = (on_host(a, lambda a: a.reshape((B, K) + a.shape[len(batch) + 1:])) for a in (qdot, xdot, J))
+    mf = None if mask is None else on_host(mask, lambda a: a.reshape(B, K))
     if is_concrete(qf, xf, Jf, mask):
-        mf = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
-        _screen(qf, xf, Jf, mf, "raise", 1e-10, batch)
-    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask).reshape(B, K))
-    g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(B)
-    w, cost, steps, status = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
-                                       max_steps=int(max_steps))
-    w = jnp.maximum(w, w_min)
+        _screen(qf, xf, Jf, np.ones((B, K), bool) if mask is None else np.asarray(mf, bool), "raise", 1e-10, batch)
+    w, cost, steps, status, converged = _lm_fit(qf, xf, Jf, mf, g, float(w_min), free=free,
+                                                max_steps=int(max_steps), batch=batch)
+    return IKWeightsLMResult(w=w, cost=cost, steps=steps, converged=converged, status=status)
+
+
+@partial(jax.jit, static_argnames=("free", "max_steps", "batch"))
+def _lm_fit(qf, xf, Jf, mask, g, w_min, *, free, max_steps, batch):
+    """:func:`estimate_ik_weights_lm` on flat items (B, K, ·) in one compiled call."""
+    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask, bool))
+    g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(qf.shape[0])
+    w, cost, steps, status = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free, max_steps=max_steps)
     status = status.reshape(batch)
-    return IKWeightsLMResult(w=w.reshape(batch + (n,)), cost=cost.reshape(batch), steps=steps.reshape(batch),
-                             converged=status == Status.SUCCESSFUL, status=status)
+    return (jnp.maximum(w, w_min).reshape(batch + w.shape[-1:]), cost.reshape(batch), steps.reshape(batch),
+            status, status == Status.SUCCESSFUL)

@@ -20,7 +20,7 @@ import numpy as np
 from .._base.batching import broadcast_batch
 from .._base.linalg import mv, spd_inv, to_soa
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_spd, to_jax
+from .._base.validate import as_array, check_positive, check_spd, is_concrete, to_jax
 from .._chains.kinematics import Chain
 from .redundancy import admittance_terms_soa, lambda0_soa
 
@@ -148,6 +148,8 @@ def damping_from_stiffness(KJ, tau0):
         raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
     tau0 = as_array("tau0", tau0)
     check_positive("tau0", tau0)
+    if is_concrete(KJ, tau0):  # (on the host: no eager XLA op)
+        return to_jax(np.asarray(tau0)[..., None, None] * np.asarray(KJ))
     return jnp.asarray(tau0)[..., None, None] * jnp.asarray(KJ)
 
 

@@ -69,6 +69,8 @@ class Trajectory:
     @property
     def speed(self):
         """Tangential task speed ``|ẋ|`` (..., S)."""
+        if is_concrete(self.xdot):
+            return to_jax(np.linalg.norm(np.asarray(self.xdot), axis=-1))
         return jnp.linalg.norm(self.xdot, axis=-1)
 
     @property
