@@ -663,13 +663,13 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     mf = None if mask is None else on_host(mask, lambda a: a.reshape(B, K))
     if is_concrete(qf, xf, Jf, mask):
         _screen(qf, xf, Jf, np.ones((B, K), bool) if mask is None else np.asarray(mf, bool), "raise", 1e-10, batch)
-    w, cost, steps, status, converged = _lm_fit(qf, xf, Jf, mf, g, float(w_min), free=free,
-                                                max_steps=int(max_steps), batch=batch)
+    w, cost, steps, status, converged = _lm_items(qf, xf, Jf, mf, g, float(w_min), free=free,
+                                                  max_steps=int(max_steps), batch=batch)
     return IKWeightsLMResult(w=w, cost=cost, steps=steps, converged=converged, status=status)
 
 
 @partial(jax.jit, static_argnames=("free", "max_steps", "batch"))
-def _lm_fit(qf, xf, Jf, mask, g, w_min, *, free, max_steps, batch):
+def _lm_items(qf, xf, Jf, mask, g, w_min, *, free, max_steps, batch):
     """:func:`estimate_ik_weights_lm` on flat items (B, K, ·) in one compiled call."""
     qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask, bool))
     g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(qf.shape[0])

@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows
+from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
@@ -77,6 +77,11 @@ def winner_take_all(scores, P):
     activation ``scores`` (..., k) — one primitive has control of the arm."""
     P = _check_primitives(P)
     scores = to_jax(as_array("scores", scores, tail=(P.shape[-2],)), float)
+    return _winner(scores, P)
+
+
+@jax.jit
+def _winner(scores, P):
     onehot = jax.nn.one_hot(jnp.argmax(scores, axis=-1), P.shape[-2], dtype=P.dtype)
     return jnp.einsum("...k,...kn->...n", onehot, P)
 
@@ -169,17 +174,12 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     qs, Ks = flatten_batch(q_set, batch, 1), flatten_batch(K, batch, 1)
     Bp = bucket(B, minimum=8)
     q, hand, res, status = (
-        a[:B]
+        unflatten_batch(a, batch, B)
         for a in _equilibrium_batch(
             arm.mjx_model, arm.layout.hand_site, pad_rows(qs, Bp), pad_rows(Ks, Bp), n_iter, float(tol)
         )
     )
-    return ArmEquilibrium(
-        q=q.reshape(batch + (n,)),
-        hand=hand.reshape(batch + (3,)),
-        residual=res.reshape(batch),
-        status=status.reshape(batch),
-    )
+    return ArmEquilibrium(q=q, hand=hand, residual=res, status=status)
 
 
 def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:

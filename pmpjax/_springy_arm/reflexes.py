@@ -121,7 +121,7 @@ def script_inputs(arm: CogArm, duration: float, *, targets=(), lead=(), release=
             raise ValueError(f"`touch` forces must be non-negative [N], got {force}")
         sel = (t >= t0) & (t < t1)
         touch_a[sel] = np.maximum(touch_a[sel], force)
-    return ReflexInputs(*(jnp.asarray(a) for a in (target, new, lead_a, rel, touch_a)))
+    return ReflexInputs(*(to_jax(np.asarray(a)) for a in (target, new, lead_a, rel, touch_a)))
 
 
 @pytree_dataclass
@@ -348,4 +348,5 @@ def stack_inputs(inputs) -> ReflexInputs:
     shapes = {tuple(np.shape(i.target)) for i in inputs}
     if len(shapes) != 1:
         raise ValueError(f"`inputs` must all have the same shape (same T and n), got {sorted(shapes)}")
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *inputs)
+    return jax.tree_util.tree_map(lambda *a: to_jax(np.stack([np.asarray(x) for x in a])) if is_concrete(a)
+                                  else jnp.stack(a), *inputs)
