@@ -85,7 +85,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import bucket, hugmp_directory, pad_rows
+from pmpjax.internal import hugmp_directory, pad_rows
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints
@@ -157,13 +157,15 @@ def _fk_jac_soa(chain, qc):
 
 
 def _fk_jac(chain, q):
-    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4) in one compiled call
-    (padded to a power of two, so that calls of similar size share a compilation)."""
+    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4) in chunks of 1024 of one
+    compiled call (every K shares one compilation)."""
     q = np.asarray(q, float).reshape(-1, 4)
     K = q.shape[0]
-    P = max(1024, 1 << max(K - 1, 1).bit_length())
-    x, J = _fk_jac_soa(chain, np.concatenate([q, np.zeros((P - K, 4))]).T)
-    return np.asarray(x).T[:K], np.moveaxis(np.asarray(J), -1, 0)[:K]
+    P = -(-max(K, 1) // 1024) * 1024
+    qp = np.concatenate([q, np.zeros((P - K, 4))])
+    parts = [jax.device_get(_fk_jac_soa(chain, qp[i:i + 1024].T)) for i in range(0, P, 1024)]
+    x, J = (np.concatenate([p[k] for p in parts], axis=-1) for k in (0, 1))
+    return x.T[:K], np.moveaxis(J, -1, 0)[:K]
 
 
 def _fk(chain, q):
@@ -350,7 +352,7 @@ def _stage2_start(theta1, cfg: _Config):
 def _tau0_W(p: dict, t_ratio):
     """Normalised ``τ0`` (B,) and ``W = τ0 W̃`` (B, 4, 4) for motions with ``T/T_rec`` = ``t_ratio``
     (NumPy for NumPy ``p``, else JAX)."""
-    xp = np if all(isinstance(v, np.ndarray) for v in (p["tau0"], p["W"], t_ratio)) else jnp
+    xp = jnp if any(isinstance(v, jax.Array) for v in (p["tau0"], p["W"], t_ratio)) else np
     tau0 = p["tau0"] * t_ratio  # (B,) normalised
     return tau0, tau0[..., None, None] * xp.broadcast_to(p["W"], tau0.shape + (4, 4))
 
@@ -383,7 +385,19 @@ def _rates(KJ, W, tau0, q0, *, minjerk: bool):
 
 
 _rates_jit = jax.jit(_rates, static_argnames=("minjerk",))
-_unpack_jit = jax.jit(_unpack, static_argnums=1)
+
+#: Rows per eager call of the jitted helpers below (padded): every row count shares one compile.
+_ROWS = 64
+
+
+def _host_rows(fn, *rows):
+    """``fn`` (jitted, row-wise) on arrays with a leading row axis R, in padded chunks of
+    ``_ROWS`` rows; results as NumPy with R rows."""
+    R = len(rows[0])
+    Rp = -(-R // _ROWS) * _ROWS
+    rows = [pad_rows(np.asarray(a), Rp) for a in rows]
+    parts = [jax.device_get(fn(*(a[i:i + _ROWS] for a in rows))) for i in range(0, Rp, _ROWS)]
+    return jax.tree_util.tree_map(lambda *p: np.concatenate(p)[:R], *parts)
 
 
 @partial(jax.jit, static_argnums=1)
@@ -392,12 +406,16 @@ def _unpack_rows(theta, cfg: _Config, elbow) -> dict:
     return jax.vmap(lambda th, e: _unpack(th, cfg, e))(theta, elbow)
 
 
-@partial(jax.jit, static_argnames=("cfg",))
-def _theta_rates(theta, elbow, t_ratio, q0, cfg: _Config):
-    """:func:`_rates` of motions (R,) at the parameters ``theta`` (p,) (one compiled call)."""
-    p = _unpack(theta, cfg, elbow)
-    tau0, W = _tau0_W(p, t_ratio)
-    return _rates(p["KJ"], W, tau0, q0, minjerk=cfg.model != "lambda0")
+def _unpack_host(theta, cfg: _Config, elbow) -> dict:
+    """:func:`_unpack` of rows ``theta`` (R, p), ``elbow`` (R,) as NumPy arrays (one compile per ``cfg``)."""
+    return _host_rows(lambda th, e: _unpack_rows(th, cfg, e), np.asarray(theta, float), np.asarray(elbow, float))
+
+
+def _rates_host(KJ, W, tau0, q0, *, minjerk: bool):
+    """:func:`_rates` (R,) of rows ``W`` (R, 4, 4), ``tau0`` (R,), ``q0`` (R, 4) and ``KJ`` (4, 4) or
+    (R, 4, 4), as NumPy (one compile per ``minjerk``)."""
+    KJ = np.broadcast_to(np.asarray(KJ, float), np.shape(W))
+    return _host_rows(lambda *a: _rates_jit(*a, minjerk=minjerk), KJ, W, tau0, q0)
 
 
 def _simulate(model, planner, q0, target, steps: int):
@@ -503,9 +521,9 @@ def _steps_for(theta, elbow, motions: list[_Motions], cfg: _Config, minimum: int
     for th, e, m in zip(theta, elbow, motions):
         if not np.all(np.isfinite(th)):
             continue
-        R = bucket(len(m.t_ratio), minimum=64)  # (padded with copies of a row: same maximum)
-        rates.append(np.asarray(_theta_rates(th, e, pad_rows(np.asarray(m.t_ratio, float), R),
-                                             pad_rows(np.asarray(m.q_obs[:, 0], float), R), cfg)))
+        p = {k: v[0] for k, v in _unpack_host(th[None], cfg, np.atleast_1d(e)).items()}
+        tau0, W = _tau0_W(p, np.asarray(m.t_ratio, float))
+        rates.append(_rates_host(p["KJ"], W, tau0, m.q_obs[:, 0], minjerk=cfg.model != "lambda0"))
     return _stability_steps(np.concatenate(rates) if rates else np.zeros(1), minimum)
 
 
@@ -878,7 +896,7 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
             continue
         k = order.index(name)
         x = out["x"][k]
-        pars = {key: np.asarray(v) for key, v in _unpack_jit(jnp.asarray(x), cfg, out["elbow"][k]).items()}
+        pars = {key: v[0] for key, v in _unpack_host(x[None], cfg, np.atleast_1d(out["elbow"][k])).items()}
         n = int(out["n_residuals"][k])
         cost = float(out["cost"][k])
         res["KJ"][a], res["q_rest"][a], res["W"][a] = pars["KJ"], pars["q_rest"], pars["W"]
@@ -956,7 +974,7 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
     tau0 = planner.tau0 if not minjerk else np.ones(len(q0))
-    rates = np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk))
+    rates = _rates_host(KJ, model.W, tau0, q0, minjerk=minjerk)
     steps = _stability_steps(rates, min_steps)
     # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
     # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
@@ -1034,7 +1052,7 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
 
     # the fitted model, one parameter set per row, and the unfitted λ0-PMP (KJ = I, q_rest = mean
     # posture, τ = τ0 = T/5): one batch when they share the planner, so one compilation
-    p = {k: np.asarray(v) for k, v in _unpack_rows(fit.params[own], cfg, fit.q_rest[own, 3]).items()}
+    p = _unpack_host(fit.params[own], cfg, fit.q_rest[own, 3])
     model, planner, _, _ = _model_and_planner(p, t_ratio, cfg)
     eye = np.broadcast_to(np.eye(4), (Bp, 4, 4))
     tau0_u = 0.2 * t_ratio
