@@ -282,6 +282,12 @@ def moves_from_targets(start, targets, t0, duration) -> Moves:
         if np.shape(v) not in ((), (M,)):
             raise ValueError(f"`{name}` must be a scalar or ({M},) (one per target), got shape {np.shape(v)}")
     check_positive("duration", duration)
+    if is_concrete(start, targets, t0, duration):  # (on the host: no eager XLA ops)
+        start, targets = np.asarray(start), np.asarray(targets)
+        prev = np.concatenate([start[None], targets[:-1]], axis=0)
+        return Moves(t0=to_jax(np.broadcast_to(np.asarray(t0, float), (M,))),
+                     duration=to_jax(np.broadcast_to(np.asarray(duration, float), (M,))),
+                     delta=to_jax(targets - prev))
     prev = jnp.concatenate([start[None], targets[:-1]], axis=0)
     return Moves(
         t0=jnp.broadcast_to(jnp.asarray(t0, float), (M,)),
@@ -300,14 +306,18 @@ def _check_times(t):
     t = as_array("t", t)
     if t.ndim != 1:
         raise ValueError(f"`t` must be a 1-D array of times (T,) [s], got shape {t.shape}")
-    return jnp.asarray(t, float)
+    return to_jax(t, float)
 
 
 def move_velocity(moves: Moves, t):
     """Summed set-point velocity (T, n) [rad/s] at times ``t`` (T,) of all ``moves``:
     ``Σ_j Δ_j / d_j · (30 s⁴ − 60 s³ + 30 s²)``, ``s = (t − t0_j) / d_j``."""
     _check_moves(moves)
-    t = _check_times(t)
+    return _move_velocity(moves, _check_times(t))
+
+
+@jax.jit
+def _move_velocity(moves, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]  # (T, M)
     return (minimum_jerk(s)[1] / moves.duration[None, :]) @ moves.delta
 
@@ -322,7 +332,10 @@ def summed_moves(moves: Moves, start, t):
     start = as_array("start", start, tail=(n,))
     if start.ndim != 1:
         raise ValueError(f"`start` must be one set-point ({n},), got shape {start.shape}")
-    start = jnp.asarray(start, float)
-    t = _check_times(t)
+    return _summed_moves(moves, to_jax(start, float), _check_times(t))
+
+
+@jax.jit
+def _summed_moves(moves, start, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]
-    return start[None, :] + minimum_jerk(s)[0] @ moves.delta, move_velocity(moves, t)
+    return start[None, :] + minimum_jerk(s)[0] @ moves.delta, _move_velocity(moves, t)
