@@ -333,16 +333,17 @@ def _items_first(out, B0):
     return tuple(jnp.moveaxis(a[..., :B0], -1, 0) for a in out)
 
 
-def _prepare(qdot, xdot, J, mask):
-    """Component-leading float arrays with masked samples replaced by harmless values."""
-    qdot, xdot, J = (jnp.asarray(a, dtype=jnp.result_type(float)) for a in (qdot, xdot, J))
+def _prepare(qdot, xdot, J, mask, xp=jnp):
+    """Component-leading float arrays with masked samples replaced by harmless values (``xp=np``:
+    on the host)."""
+    qdot, xdot, J = (xp.asarray(a, dtype=jnp.result_type(float)) for a in (qdot, xdot, J))
     lead = qdot.shape[:-1]
-    valid = jnp.ones(lead, bool) if mask is None else jnp.asarray(mask, bool)
+    valid = xp.ones(lead, bool) if mask is None else xp.asarray(mask, bool)
     m, n = J.shape[-2:]
-    safe_J = jnp.eye(m, n, dtype=J.dtype)
-    Jv = jnp.where(valid[..., None, None], J, safe_J)
-    qv = jnp.where(valid[..., None], qdot, 0.0)
-    xv = jnp.where(valid[..., None], xdot, 0.0)
+    safe_J = xp.eye(m, n, dtype=J.dtype)
+    Jv = xp.where(valid[..., None, None], J, safe_J)
+    qv = xp.where(valid[..., None], qdot, 0.0)
+    xv = xp.where(valid[..., None], xdot, 0.0)
     return to_soa(qv), to_soa(xv), to_soa(Jv, 2), valid
 
 
@@ -661,19 +662,17 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     B = int(np.prod(batch)) if batch else 1
     qf, xf, Jf = (on_host(a, lambda a: a.reshape((B, K) + a.shape[len(batch) + 1:])) for a in (qdot, xdot, J))
     mf = None if mask is None else on_host(mask, lambda a: a.reshape(B, K))
-    if is_concrete(qf, xf, Jf, mask):
+    concrete = is_concrete(qf, xf, Jf, mask, g)
+    if concrete:
         _screen(qf, xf, Jf, np.ones((B, K), bool) if mask is None else np.asarray(mf, bool), "raise", 1e-10, batch)
-    w, cost, steps, status, converged = _lm_items(qf, xf, Jf, mf, g, float(w_min), free=free,
-                                                  max_steps=int(max_steps), batch=batch)
-    return IKWeightsLMResult(w=w, cost=cost, steps=steps, converged=converged, status=status)
-
-
-@partial(jax.jit, static_argnames=("free", "max_steps", "batch"))
-def _lm_items(qf, xf, Jf, mask, g, w_min, *, free, max_steps, batch):
-    """:func:`estimate_ik_weights_lm` on flat items (B, K, ·) in one compiled call."""
-    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask, bool))
-    g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(qf.shape[0])
-    w, cost, steps, status = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free, max_steps=max_steps)
+    # (concrete: preparation and results on the host, so that the call compiles the kernel only)
+    xp = np if concrete else jnp
+    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else xp.asarray(mf, bool), xp=xp)
+    g = xp.broadcast_to(xp.asarray(g, qd.dtype), batch).reshape(B)
+    out = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free, max_steps=int(max_steps))
+    w, cost, steps, status = jax.device_get(out) if concrete else out
+    w = xp.maximum(w, w_min)
     status = status.reshape(batch)
-    return (jnp.maximum(w, w_min).reshape(batch + w.shape[-1:]), cost.reshape(batch), steps.reshape(batch),
-            status, status == Status.SUCCESSFUL)
+    w, cost, steps, status, conv = (to_jax(a) if concrete else a for a in (
+        w.reshape(batch + (n,)), cost.reshape(batch), steps.reshape(batch), status, status == Status.SUCCESSFUL))
+    return IKWeightsLMResult(w=w, cost=cost, steps=steps, converged=conv, status=status)
