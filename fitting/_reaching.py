@@ -408,6 +408,7 @@ def _unpack_rows(theta, cfg: _Config, elbow) -> dict:
 
 def _unpack_host(theta, cfg: _Config, elbow) -> dict:
     """:func:`_unpack` of rows ``theta`` (R, p), ``elbow`` (R,) as NumPy arrays (one compile per ``cfg``)."""
+    cfg = _Config(cfg.model, cfg.damping, cfg.time_constants, 0)  # (the fields _unpack reads)
     return _host_rows(lambda th, e: _unpack_rows(th, cfg, e), np.asarray(theta, float), np.asarray(elbow, float))
 
 
