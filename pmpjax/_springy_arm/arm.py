@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import flatten_batch
+from .._base.batching import flatten_batch, on_host
 from .._base.mujoco import import_mjx, import_mujoco, load_spec
 from .._base.pytree import pytree_dataclass
 from .._base.validate import as_array, check_positive_int, is_concrete, to_jax
@@ -596,9 +596,9 @@ def rollout(
     q_set = as_array("q_set", q_set, tail=(None, arm.n))
     if q_set.shape[-2] < 1:
         raise ValueError(f"`q_set` must have at least one step, got shape {q_set.shape}")
-    q_set = jnp.asarray(q_set, float)
+    q_set = to_jax(q_set, float)
     if q0 is None:
-        q0 = q_set[..., 0, :]
+        q0 = on_host(q_set, lambda a: a[..., 0, :])
     if backend == "mjx":
         return run_controller(
             arm,

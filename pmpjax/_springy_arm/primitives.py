@@ -43,7 +43,7 @@ PRIMITIVES = (
 
 def default_primitives():
     """The four primitives ``P`` (4, 6) [rad] named in ``PRIMITIVE_NAMES`` (rest, down, up, side)."""
-    return jnp.asarray(PRIMITIVES, dtype=float)
+    return to_jax(np.asarray(PRIMITIVES, dtype=float))
 
 
 def check_set_point(name: str, q_set, n: int):
@@ -229,12 +229,13 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
         batch = tuple(np.broadcast_shapes(q.shape, q_set.shape, K.shape))
     except ValueError as e:
         raise ValueError(f"leading axes of `q` {q.shape}, `q_set` {q_set.shape}, `K` {K.shape} do not broadcast") from e
-    q = jnp.broadcast_to(q, batch)
-    tau = -jnp.broadcast_to(K, batch) * (q - jnp.broadcast_to(q_set, batch))
+    xp = np if is_concrete(q, q_set, K) else jnp  # (the spring torque on the host: no eager XLA ops)
+    q = xp.broadcast_to(xp.asarray(q), batch)
+    tau = -xp.broadcast_to(xp.asarray(K), batch) * (q - xp.broadcast_to(xp.asarray(q_set), batch))
     if gravity:
-        tau = tau - gravity_gradients(chain.mjx_model, q.reshape(-1, n)).reshape(batch)
+        tau = tau - xp.asarray(gravity_gradients(chain.mjx_model, q.reshape(-1, n))).reshape(batch)
     J = chain.jacobian(q)
-    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
+    Jp = weighted_pinv(J, w=xp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
     return jnp.einsum("...nm,...n->...m", Jp, tau)
 
 
