@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -95,3 +96,22 @@ def pad_rows(a, size: int, *, axis: int = 0, fill: str = "edge"):
     else:
         raise ValueError(f"`fill` must be 'edge' or 'zeros', got {fill!r}")
     return xp.concatenate([a, extra], axis=axis)
+
+
+def eager_rows(fn, x, core: int, *, small: int = 64, chunk: int = 1024):
+    """``fn(x)`` for a row-wise jitted ``fn`` and ``x`` (..., *core) with ``core`` trailing axes.
+
+    A concrete ``x`` is flattened to rows, padded to ``small`` rows or cut into padded chunks of
+    ``chunk`` rows, so that every batch shape shares two compilations of ``fn``; the outputs'
+    leading row axis is unflattened again (``jax.Array``). A tracer goes to ``fn`` as it is.
+    """
+    if not is_concrete(x) or np.size(x) == 0:
+        return fn(x)
+    x = np.asarray(x)
+    batch = x.shape[: x.ndim - core]
+    B = math.prod(batch)
+    Bp = small if B <= small else -(-B // chunk) * chunk
+    flat = pad_rows(x.reshape((B,) + x.shape[x.ndim - core :]), Bp)
+    size = min(Bp, chunk)
+    parts = [jax.device_get(fn(flat[i : i + size])) for i in range(0, Bp, size)]
+    return jax.tree_util.tree_map(lambda *p: to_jax(np.concatenate(p)[:B].reshape(batch + p[0].shape[1:])), *parts)

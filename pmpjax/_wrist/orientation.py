@@ -13,8 +13,9 @@ Conventions (all functions take leading batch axes and are differentiable):
   ``(q_PS + π, π − q_FE, q_RUD + π)`` gives the same ``R`` and is never returned.
 
 Inputs are checked before tracing (``ValueError`` naming the argument for a wrong trailing shape,
-or NaN/inf when concrete; a zero quaternion is rejected); each function then makes one jitted call
-(an eager call compiles once per shape, not once per ``jnp`` op).
+or NaN/inf when concrete; a zero quaternion is rejected); each function then makes one jitted call,
+on rows padded to 64 or in chunks of 1024 when eager (``eager_rows``: two compilations for every
+batch shape, not one per ``jnp`` op and shape).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import eager_rows
 from .._base.validate import as_array, is_concrete, to_jax
 from .._chains.kinematics import Wrist
 
@@ -49,7 +51,7 @@ def _convention(convention):
 
 def wrist_rotation(q):
     """Hand orientation ``R(q)`` (..., 3, 3) of wrist joint angles ``q`` (..., 3) [rad] (Eq 6)."""
-    return _rotation(_arr("q", q, (3,)))
+    return eager_rows(_rotation, _arr("q", q, (3,)), 1)
 
 
 @jax.jit
@@ -69,7 +71,7 @@ def quat_from_matrix(R):
     Shepperd's method: the largest of ``(w², x², y², z²)`` is computed from the diagonal and the
     others from off-diagonal sums, so the result is accurate for every rotation.
     """
-    return _quat_from_matrix(_arr("R", R, (3, 3)))
+    return eager_rows(_quat_from_matrix, _arr("R", R, (3, 3)), 2)
 
 
 @jax.jit
@@ -98,7 +100,7 @@ def _quat_from_matrix(R):
 
 def matrix_from_quat(quat):
     """Rotation matrix (..., 3, 3) of quaternions ``(w, x, y, z)`` (..., 4) (normalised first)."""
-    return _matrix_from_quat(_quat("quat", quat))
+    return eager_rows(_matrix_from_quat, _quat("quat", quat), 1)
 
 
 @jax.jit
@@ -119,7 +121,7 @@ def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
     """Rotation vector (..., 3) of quaternions (..., 4); ``convention`` "axis_angle" (θ n, rad)
     or "rodrigues" (tan(θ/2) n)."""
     _convention(convention)
-    return _rotvec_from_quat(_quat("quat", quat), convention)
+    return eager_rows(lambda q: _rotvec_from_quat(q, convention), _quat("quat", quat), 1)
 
 
 @partial(jax.jit, static_argnums=1)
@@ -139,7 +141,7 @@ def _rotvec_from_quat(quat, convention):
 
 def quat_from_rotvec(r):
     """Quaternion ``(w, x, y, z)`` (..., 4) of axis·angle rotation vectors ``r`` (..., 3) [rad]."""
-    return _quat_from_rotvec(_arr("r", r, (3,)))
+    return eager_rows(_quat_from_rotvec, _arr("r", r, (3,)), 1)
 
 
 @jax.jit
@@ -171,7 +173,7 @@ def joint_angles_from_matrix(R):
     ``(R[1,1], R[2,1]) = cos b (cos a, −sin a)``. Branch ``|q_FE| < π/2``; undefined at gimbal lock
     ``|q_FE| = π/2`` (the wrist points along the screen, outside every reachable target).
     """
-    return _joint_angles_from_matrix(_arr("R", R, (3, 3)))
+    return eager_rows(_joint_angles_from_matrix, _arr("R", R, (3, 3)), 2)
 
 
 @jax.jit
