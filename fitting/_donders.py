@@ -53,8 +53,10 @@ from pmpjax.internal import (
     check_positive_int,
     check_spd,
     equilibrium_one,
+    on_host,
     pad_rows,
     replace,
+    to_jax,
 )
 
 from ._optimise import covariance, least_squares
@@ -73,7 +75,11 @@ def _sym_index(n):
 
 def stiffness_from_params(s, n: int, trace: float = 4.0):
     """``KJ`` (n, n) SPD with ``tr KJ = trace`` from ``s`` (n(n+1)/2 − 1,): ``t expm(S)/tr expm(S)``."""
-    s = _params_vector("s", s, n, n * (n + 1) // 2 - 1)
+    return _stiffness_from_params(_params_vector("s", s, n, n * (n + 1) // 2 - 1), n, trace)
+
+
+@partial(jax.jit, static_argnums=1)
+def _stiffness_from_params(s, n, trace):
     idx = _sym_index(n)
     S = jnp.zeros((n, n), s.dtype)
     for k, (i, j) in enumerate(idx):
@@ -87,7 +93,7 @@ def _params_vector(name, v, n, size):
     """Shape checks (before tracing) of a parameter vector of an n-joint chain."""
     if int(n) != n or n < 2:
         raise ValueError(f"`n` must be an integer >= 2 (joints), got {n}")
-    v = jnp.asarray(as_array(name, v, tail=(size,)))
+    v = to_jax(as_array(name, v, tail=(size,)))
     if v.ndim != 1:
         raise ValueError(f"`{name}` must be a vector of shape ({size},) for n = {n}, got {v.shape}")
     return v
@@ -123,8 +129,13 @@ def donders_coefficients(params, n: int, trace: float = 4.0):
     """Coefficients ``c`` (p,) of Donders' law ``N(q)ᵀ(KJ q − b) = 0``: the free entries of ``KJ``
     (diagonal 0..n−2, then the upper triangle) and ``b = KJ q_rest`` [Nm], from ``params`` (p,)."""
     n_k = n * (n + 1) // 2 - 1
-    params = _params_vector("params", params, n, n_k + n)
-    KJ = stiffness_from_params(params[:n_k], n, trace)
+    return _donders_coefficients(_params_vector("params", params, n, n_k + n), n, trace)
+
+
+@partial(jax.jit, static_argnums=1)
+def _donders_coefficients(params, n, trace):
+    n_k = n * (n + 1) // 2 - 1
+    KJ = _stiffness_from_params(params[:n_k], n, trace)
     return jnp.concatenate([jnp.stack([KJ[i, j] for i, j in _sym_index(n)]), KJ @ params[n_k:]])
 
 
@@ -450,9 +461,10 @@ def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
     if not isinstance(chain, Wrist):
         raise TypeError(f"`chain` must be a pmpjax.Wrist, got {type(chain).__name__}")
     q = equilibrium_posture(
-        chain, jnp.asarray(KJ)[..., None, :, :], jnp.asarray(q_rest)[..., None, :], pointing
+        chain, on_host(jnp.asarray(KJ), lambda a: a[..., None, :, :]),
+        on_host(jnp.asarray(q_rest), lambda a: a[..., None, :]), pointing
     ).q
-    return rotvec_from_joint_angles(q)[..., 0]
+    return on_host(rotvec_from_joint_angles(q), lambda r: r[..., 0])
 
 
 def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: int = 17, **options) -> DondersFit:

@@ -35,6 +35,7 @@ from pmpjax.internal import (
     forward_jacobians,
     is_concrete,
     pytree_dataclass,
+    to_jax,
 )
 
 
@@ -77,7 +78,7 @@ def least_squares(
     """
     if not callable(residual):
         raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
-    x0 = jnp.asarray(as_array("x0", x0), dtype=jnp.result_type(float))
+    x0 = to_jax(as_array("x0", x0), dtype=jnp.result_type(float))
     if x0.ndim != 1:
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
     if is_concrete(max_steps):  # (a traced step limit, e.g. per item under lax.map, is the caller's)

@@ -157,13 +157,15 @@ def _fk_jac_soa(chain, qc):
 
 
 def _fk_jac(chain, q):
-    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4) in one compiled call
-    (padded to a power of two, so that calls of similar size share a compilation)."""
+    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4) in chunks of 1024 of one
+    compiled call (every K shares one compilation)."""
     q = np.asarray(q, float).reshape(-1, 4)
     K = q.shape[0]
-    P = max(1024, 1 << max(K - 1, 1).bit_length())
-    x, J = _fk_jac_soa(chain, np.concatenate([q, np.zeros((P - K, 4))]).T)
-    return np.asarray(x).T[:K], np.moveaxis(np.asarray(J), -1, 0)[:K]
+    P = -(-max(K, 1) // 1024) * 1024
+    qp = np.concatenate([q, np.zeros((P - K, 4))])
+    parts = [jax.device_get(_fk_jac_soa(chain, qp[i:i + 1024].T)) for i in range(0, P, 1024)]
+    x, J = (np.concatenate([p[k] for p in parts], axis=-1) for k in (0, 1))
+    return x.T[:K], np.moveaxis(J, -1, 0)[:K]
 
 
 def _fk(chain, q):
@@ -347,11 +349,18 @@ def _stage2_start(theta1, cfg: _Config):
 # the model on normalised time
 
 
+def _tau0_W(p: dict, t_ratio):
+    """Normalised ``τ0`` (B,) and ``W = τ0 W̃`` (B, 4, 4) for motions with ``T/T_rec`` = ``t_ratio``
+    (NumPy for NumPy ``p``, else JAX)."""
+    xp = jnp if any(isinstance(v, jax.Array) for v in (p["tau0"], p["W"], t_ratio)) else np
+    tau0 = p["tau0"] * t_ratio  # (B,) normalised
+    return tau0, tau0[..., None, None] * xp.broadcast_to(p["W"], tau0.shape + (4, 4))
+
+
 def _model_and_planner(p: dict, t_ratio, cfg: _Config):
     """λ0-PMP and planner for motions with ``T/T_rec`` = ``t_ratio`` (B,); ``p`` per subject
     (or with a leading (B,) axis per motion). Also returns the normalised ``τ0`` (B,) and ``W``."""
-    tau0 = p["tau0"] * t_ratio  # (B,) normalised
-    W = tau0[..., None, None] * jnp.broadcast_to(p["W"], tau0.shape + (4, 4))
+    tau0, W = _tau0_W(p, t_ratio)
     model = pj.Lambda0PMP(_chain(), KJ=p["KJ"], q_rest=p["q_rest"], W=W)
     if cfg.model == "lambda0":
         planner = pj.ArimotoPlanner(k=None, tau=p["tau"] * t_ratio, tau0=tau0)
@@ -376,6 +385,38 @@ def _rates(KJ, W, tau0, q0, *, minjerk: bool):
 
 
 _rates_jit = jax.jit(_rates, static_argnames=("minjerk",))
+
+#: Rows per eager call of the jitted helpers below (padded): every row count shares one compile.
+_ROWS = 64
+
+
+def _host_rows(fn, *rows):
+    """``fn`` (jitted, row-wise) on arrays with a leading row axis R, in padded chunks of
+    ``_ROWS`` rows; results as NumPy with R rows."""
+    R = len(rows[0])
+    Rp = -(-R // _ROWS) * _ROWS
+    rows = [pad_rows(np.asarray(a), Rp) for a in rows]
+    parts = [jax.device_get(fn(*(a[i:i + _ROWS] for a in rows))) for i in range(0, Rp, _ROWS)]
+    return jax.tree_util.tree_map(lambda *p: np.concatenate(p)[:R], *parts)
+
+
+@partial(jax.jit, static_argnums=1)
+def _unpack_rows(theta, cfg: _Config, elbow) -> dict:
+    """:func:`_unpack` of rows ``theta`` (B, p), ``elbow`` (B,) in one compiled call."""
+    return jax.vmap(lambda th, e: _unpack(th, cfg, e))(theta, elbow)
+
+
+def _unpack_host(theta, cfg: _Config, elbow) -> dict:
+    """:func:`_unpack` of rows ``theta`` (R, p), ``elbow`` (R,) as NumPy arrays (one compile per ``cfg``)."""
+    cfg = _Config(cfg.model, cfg.damping, cfg.time_constants, 0)  # (the fields _unpack reads)
+    return _host_rows(lambda th, e: _unpack_rows(th, cfg, e), np.asarray(theta, float), np.asarray(elbow, float))
+
+
+def _rates_host(KJ, W, tau0, q0, *, minjerk: bool):
+    """:func:`_rates` (R,) of rows ``W`` (R, 4, 4), ``tau0`` (R,), ``q0`` (R, 4) and ``KJ`` (4, 4) or
+    (R, 4, 4), as NumPy (one compile per ``minjerk``)."""
+    KJ = np.broadcast_to(np.asarray(KJ, float), np.shape(W))
+    return _host_rows(lambda *a: _rates_jit(*a, minjerk=minjerk), KJ, W, tau0, q0)
 
 
 def _simulate(model, planner, q0, target, steps: int):
@@ -481,11 +522,9 @@ def _steps_for(theta, elbow, motions: list[_Motions], cfg: _Config, minimum: int
     for th, e, m in zip(theta, elbow, motions):
         if not np.all(np.isfinite(th)):
             continue
-        p = _unpack(jnp.asarray(th), cfg, e)
-        t_ratio = jnp.asarray(m.t_ratio)
-        _, _, tau0, W = _model_and_planner(p, t_ratio, cfg)
-        rates.append(np.asarray(_rates_jit(p["KJ"], W, tau0, jnp.asarray(m.q_obs[:, 0]),
-                                           minjerk=cfg.model != "lambda0")))
+        p = {k: v[0] for k, v in _unpack_host(th[None], cfg, np.atleast_1d(e)).items()}
+        tau0, W = _tau0_W(p, np.asarray(m.t_ratio, float))
+        rates.append(_rates_host(p["KJ"], W, tau0, m.q_obs[:, 0], minjerk=cfg.model != "lambda0"))
     return _stability_steps(np.concatenate(rates) if rates else np.zeros(1), minimum)
 
 
@@ -858,7 +897,7 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
             continue
         k = order.index(name)
         x = out["x"][k]
-        pars = {key: np.asarray(v) for key, v in _unpack(jnp.asarray(x), cfg, out["elbow"][k]).items()}
+        pars = {key: v[0] for key, v in _unpack_host(x[None], cfg, np.atleast_1d(out["elbow"][k])).items()}
         n = int(out["n_residuals"][k])
         cost = float(out["cost"][k])
         res["KJ"][a], res["q_rest"][a], res["W"][a] = pars["KJ"], pars["q_rest"], pars["W"]
@@ -934,9 +973,9 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
     """Simulate rows (R,) with a step count that keeps RK4 well inside its stability bound;
     returns ``q`` (R, 50, 4), ``x`` (R, 50, 3), ``status`` (R,) as ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
-    KJ = model.KJ if model.KJ is not None else jnp.zeros_like(model.W)
-    tau0 = planner.tau0 if not minjerk else jnp.ones(len(q0))
-    rates = np.asarray(_rates_jit(KJ, model.W, tau0, q0, minjerk=minjerk))
+    KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
+    tau0 = planner.tau0 if not minjerk else np.ones(len(q0))
+    rates = _rates_host(KJ, model.W, tau0, q0, minjerk=minjerk)
     steps = _stability_steps(rates, min_steps)
     # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
     # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
@@ -959,7 +998,7 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
 def _concat(a, b):
     """Rows of two models (or planners) of one kind in one batch; shared scalars (the chain's
     lengths) stay as they are."""
-    return jax.tree_util.tree_map(lambda u, v: u if np.ndim(u) == 0 else jnp.concatenate([u, v]), a, b)
+    return jax.tree_util.tree_map(lambda u, v: u if np.ndim(u) == 0 else np.concatenate([u, v]), a, b)
 
 
 def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction:
@@ -1014,8 +1053,7 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
 
     # the fitted model, one parameter set per row, and the unfitted λ0-PMP (KJ = I, q_rest = mean
     # posture, τ = τ0 = T/5): one batch when they share the planner, so one compilation
-    p = {k: np.asarray(v) for k, v in jax.vmap(lambda th, e: _unpack(th, cfg, e))(
-        jnp.asarray(fit.params[own]), jnp.asarray(fit.q_rest[own, 3])).items()}
+    p = _unpack_host(fit.params[own], cfg, fit.q_rest[own, 3])
     model, planner, _, _ = _model_and_planner(p, t_ratio, cfg)
     eye = np.broadcast_to(np.eye(4), (Bp, 4, 4))
     tau0_u = 0.2 * t_ratio

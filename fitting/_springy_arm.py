@@ -27,6 +27,7 @@ from pmpjax.internal import (
     check_stiffness,
     pad_rows,
     pytree_dataclass,
+    to_jax,
 )
 
 from ._optimise import least_squares
@@ -75,10 +76,10 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     """
     check_arm(arm)
     n = arm.n
-    P = jnp.asarray(as_array("P", P, tail=(None, n)), float)
+    P = to_jax(as_array("P", P, tail=(None, n)), float)
     if P.ndim != 2 or P.shape[0] < 2:
         raise ValueError(f"`P` must be (k, {n}) with k >= 2 primitives, got {P.shape}")
-    target = jnp.asarray(as_array("target", target, tail=(3,)), float)
+    target = to_jax(as_array("target", target, tail=(3,)), float)
     K = check_stiffness("K", arm.K if K is None else K, n)
     if K.shape != (n,):
         raise ValueError(f"`K` must have shape ({n},), got {K.shape}")
@@ -142,7 +143,7 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
     q_set = check_set_point("q_set", q_set, n)
     if q_set.ndim != 2:
         raise ValueError(f"`q_set` must be (P, {n}) set-points, got {q_set.shape}")
-    q_obs = jnp.asarray(as_array("q_observed", q_observed, tail=q_set.shape), float)
+    q_obs = to_jax(as_array("q_observed", q_observed, tail=q_set.shape), float)
     K0 = check_stiffness("K0", arm.K if K0 is None else K0, n)
     if K0.shape != (n,):
         raise ValueError(f"`K0` must have shape ({n},), got {K0.shape}")

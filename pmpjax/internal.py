@@ -9,7 +9,9 @@ part of the stable API — names here may change between releases without deprec
 # Leading batch axes and padding (pmpjax/_base/batching.py)
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
+from ._base.batching import on_host as on_host
 from ._base.batching import pad_rows as pad_rows
+from ._base.batching import unflatten_batch as unflatten_batch
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first
 from ._base.linalg import det as det
@@ -31,6 +33,7 @@ from ._base.validate import check_positive_int as check_positive_int
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import is_concrete as is_concrete
+from ._base.validate import to_jax as to_jax
 
 # Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
 from ._config import ConfigError as ConfigError

@@ -1,6 +1,32 @@
-"""Independent NumPy implementations (no pmpjax code) used as references by the tests."""
+"""Independent NumPy implementations (no pmpjax code) used as references by the tests, and
+:func:`compiled_names` (the XLA compilations of a block)."""
 
+import contextlib
+import logging
+import re
+
+import jax
 import numpy as np
+
+
+@contextlib.contextmanager
+def compiled_names():
+    """Yields the list of the names (``jit(f)``) of the XLA programs compiled inside the block."""
+    names = []
+
+    class _Handler(logging.Handler):
+        def emit(self, record):
+            m = re.match(r"Finished XLA compilation of (\S+)", record.getMessage())
+            if m:
+                names.append(m.group(1))
+
+    logger, handler = logging.getLogger("jax"), _Handler()
+    logger.addHandler(handler)
+    try:
+        with jax.log_compiles(True):
+            yield names
+    finally:
+        logger.removeHandler(handler)
 
 
 def rx(t):

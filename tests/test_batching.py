@@ -5,10 +5,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.optimize
-from _reference import central_diff
+from _reference import central_diff, compiled_names
 
-from pmpjax._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
+from pmpjax._base.batching import broadcast_batch, bucket, flatten_batch, head_rows, pad_rows, unflatten_batch
 from pmpjax._base.newton import newton_solve
+from pmpjax._base.validate import to_jax
 
 # --- batching -----------------------------------------------------------------------------------
 
@@ -24,6 +25,21 @@ def test_broadcast_flatten_round_trip():
     np.testing.assert_array_equal(np.asarray(unflatten_batch(Kf, batch))[1, 2], K[1, 0])
     with pytest.raises(ValueError, match=r"`K` \(2,\), `q` \(4,\)"):
         broadcast_batch(K=(K[:, 0], 2), q=(q, 1))
+
+
+def test_concrete_arrays_are_batched_without_compiling():
+    # Which bug: a helper that reshapes, pads or slices a concrete jax.Array with an eager jnp op
+    # (or converts NumPy with jnp.asarray) compiles an XLA program for every new shape: 30-100 ms
+    # each, hundreds in one `pmpjax reproduce`.
+    a = jax.device_put(np.arange(7 * 3, dtype=float).reshape(7, 3) + 0.25)  # a shape nothing else uses
+    with compiled_names() as names:
+        f, p = flatten_batch(a, (7,), 1), pad_rows(a, 11)
+        u, h, t = unflatten_batch(p, (7, 1), 7), head_rows(p, 7), to_jax(np.ones((13, 3)))
+    assert names == []
+    assert all(isinstance(x, jax.Array) for x in (f, p, u, h, t))
+    np.testing.assert_array_equal(np.asarray(p)[7:], np.broadcast_to(np.asarray(a)[-1], (4, 3)))  # "edge"
+    np.testing.assert_array_equal(np.asarray(u)[:, 0], np.asarray(a))
+    np.testing.assert_array_equal(np.asarray(h), np.asarray(a))
 
 
 def test_bucket_and_pad():

@@ -7,7 +7,7 @@ import pytest
 from _problems import KJ_S1 as KJ1
 from _problems import PLANAR_KJ, PLANAR_L, PLANAR_Q_REST
 from _problems import QREST_S1 as QR1
-from _reference import central_diff, symmetric_directions
+from _reference import central_diff, compiled_names, symmetric_directions
 from scipy.optimize import minimize
 
 import pmpjax as pj
@@ -169,6 +169,28 @@ def test_batch_equals_singles(wrist):
             for field in ("q", "lam", "status", "kkt_residual", "steps"):
                 np.testing.assert_allclose(np.asarray(getattr(batch, field))[s, t], np.asarray(getattr(one, field)),
                                            rtol=0, atol=1e-15)
+
+
+def test_eager_batch_sizes_share_the_kernel(wrist):
+    """Eager calls pad to 64 rows or solve chunks of 1024: every size reuses one of two compiled
+    kernels and every row is still its own solution. Which bug: per-size padding recompiles the
+    solver (seconds) for each new batch size; a wrong chunk offset or unpadding mixes up rows."""
+    targets = np.random.default_rng(7).uniform(-0.3, 0.3, (1100, 2))
+    pj.equilibrium_posture(wrist, KJ1, QR1, targets[:3])  # the 64-row kernel
+    with compiled_names() as names:
+        small = pj.equilibrium_posture(wrist, KJ1, QR1, targets[:50])
+    assert names == []
+    big = pj.equilibrium_posture(wrist, KJ1, QR1, targets)  # two chunks of the 1024-row kernel
+    with compiled_names() as names:
+        pj.equilibrium_posture(wrist, KJ1, QR1, targets[:700])
+    assert names == []
+    assert big.q.shape == (1100, 3) and bool(np.all(big.converged))
+    q = np.asarray(big.q)
+    np.testing.assert_allclose([_fk_np(wrist, qi) for qi in q], targets, atol=1e-12)  # on its own target
+    np.testing.assert_allclose(q[:50], np.asarray(small.q), rtol=0, atol=1e-15)
+    for i in (1023, 1024, 1099):  # across the chunk boundary and in the padded last chunk
+        np.testing.assert_allclose(q[i], np.asarray(pj.equilibrium_posture(wrist, KJ1, QR1, targets[i]).q),
+                                   rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize(

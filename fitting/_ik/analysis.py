@@ -5,12 +5,14 @@ intervals over trials, and Hotelling's T² between two conditions.
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass
+from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass, to_jax
 
 from .examples import _check_key
 from .weights import estimate_ik_weights
@@ -50,7 +52,12 @@ def contribution_coefficients(w):
     ``w`` (..., n); they sum to one. Differentiable."""
     w = as_array("w", w, tail=(None,))
     check_positive("w", w)
-    inv = 1.0 / jnp.asarray(w)
+    return _contributions(to_jax(w))
+
+
+@jax.jit
+def _contributions(w):
+    inv = 1.0 / w
     return inv / jnp.sum(inv, axis=-1, keepdims=True)
 
 
@@ -185,12 +192,12 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     res = estimate_ik_weights(take(qdot), take(xdot), take(J), on_invalid="flag",
                               mask=mk.reshape((n_rep,) + batch + (Tb * S,)), **options)
     a = (1.0 - float(level)) / 2.0
-    ws = np.asarray(res.w[1:])
+    w_all, conv, st = (np.asarray(v) for v in (res.w, res.converged, res.status))
+    ws = w_all[1:]
     with np.errstate(invalid="ignore"):
-        lo = jnp.asarray(np.nanquantile(ws, a, axis=0))
-        hi = jnp.asarray(np.nanquantile(ws, 1.0 - a, axis=0))
-    return BootstrapResult(w=res.w[0], lo=lo, hi=hi, samples=jnp.asarray(ws), converged=res.converged[1:],
-                           status=res.status[1:], w_status=res.status[0])
+        lo, hi = np.nanquantile(ws, a, axis=0), np.nanquantile(ws, 1.0 - a, axis=0)
+    return BootstrapResult(w=to_jax(w_all[0]), lo=to_jax(lo), hi=to_jax(hi), samples=to_jax(ws),
+                           converged=to_jax(conv[1:]), status=to_jax(st[1:]), w_status=to_jax(st[0]))
 
 
 @pytree_dataclass
@@ -213,8 +220,8 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
     ``F = (N1 + N2 − p − 1) / (p (N1 + N2 − 2)) T² ~ F(p, N1 + N2 − p − 1)``). Drop variables that
     are constant in both conditions (e.g. weights fixed at 1) before calling: S must be invertible.
     """
-    a = jnp.asarray(as_array("a", a, tail=(None,)), dtype=float)
-    b = jnp.asarray(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
+    a = to_jax(as_array("a", a, tail=(None,)), dtype=float)
+    b = to_jax(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
     if a.ndim != 2 or b.ndim != 2:
         raise ValueError(f"`a` and `b` must be (N, p) matrices, got {a.shape} and {b.shape}")
     if not isinstance(paired, bool | np.bool_):
@@ -226,6 +233,26 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
         N = a.shape[0]
         if N <= p:
             raise ValueError(f"need more subjects than variables (N = {N}, p = {p})")
+        df1, df2 = p, N - p
+    else:
+        n1, n2 = a.shape[0], b.shape[0]
+        if n1 + n2 - p - 1 < 1:
+            raise ValueError(f"too few samples (N1 = {n1}, N2 = {n2}) for p = {p} variables")
+        df1, df2 = p, n1 + n2 - p - 1
+    t2, f, S, pval = _hotelling(a, b, bool(paired))
+    Sn = np.asarray(S)
+    if np.linalg.matrix_rank(Sn, tol=1e-12 * max(float(np.abs(Sn).max()), 1e-300)) < p:
+        raise ValueError("the covariance of `a`/`b` is singular: drop variables that are constant or "
+                         "linearly dependent (e.g. weights fixed at 1) before the test")
+    return HotellingResult(t2=t2, f=f, df1=to_jax(np.asarray(df1)), df2=to_jax(np.asarray(df2)), p=pval)
+
+
+@partial(jax.jit, static_argnums=2)
+def _hotelling(a, b, paired):
+    """``T²``, ``F``, the pooled covariance and the p-value of :func:`hotelling_t2` (one compiled call)."""
+    p = a.shape[1]
+    if paired:
+        N = a.shape[0]
         d = a - b
         dbar = d.mean(0)
         dc = d - dbar[None]
@@ -235,19 +262,12 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
         f = (N - p) / (p * (N - 1)) * t2
     else:
         n1, n2 = a.shape[0], b.shape[0]
-        if n1 + n2 - p - 1 < 1:
-            raise ValueError(f"too few samples (N1 = {n1}, N2 = {n2}) for p = {p} variables")
         da, db = a - a.mean(0)[None], b - b.mean(0)[None]
         S = (da.T @ da + db.T @ db) / (n1 + n2 - 2)
         diff = a.mean(0) - b.mean(0)
         t2 = n1 * n2 / (n1 + n2) * diff @ jnp.linalg.solve(S, diff)
         df1, df2 = p, n1 + n2 - p - 1
         f = df2 / (p * (n1 + n2 - 2)) * t2
-    Sn = np.asarray(S)
-    if np.linalg.matrix_rank(Sn, tol=1e-12 * max(float(np.abs(Sn).max()), 1e-300)) < p:
-        raise ValueError("the covariance of `a`/`b` is singular: drop variables that are constant or "
-                         "linearly dependent (e.g. weights fixed at 1) before the test")
     # F survival function through the regularised incomplete beta function
     x = df2 / (df2 + df1 * f)
-    pval = jax.scipy.special.betainc(df2 / 2.0, df1 / 2.0, x)
-    return HotellingResult(t2=t2, f=f, df1=jnp.asarray(df1), df2=jnp.asarray(df2), p=pval)
+    return t2, f, S, jax.scipy.special.betainc(df2 / 2.0, df1 / 2.0, x)

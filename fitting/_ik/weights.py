@@ -32,10 +32,13 @@ from pmpjax.internal import (
     flatten_batch,
     is_concrete,
     mv,
+    on_host,
     pinv_apply_diag_soa,
     pinv_diag_lists,
     pytree_dataclass,
+    to_jax,
     to_soa,
+    unflatten_batch,
 )
 
 from .._optimise import least_squares
@@ -330,16 +333,17 @@ def _items_first(out, B0):
     return tuple(jnp.moveaxis(a[..., :B0], -1, 0) for a in out)
 
 
-def _prepare(qdot, xdot, J, mask):
-    """Component-leading float arrays with masked samples replaced by harmless values."""
-    qdot, xdot, J = (jnp.asarray(a, dtype=jnp.result_type(float)) for a in (qdot, xdot, J))
+def _prepare(qdot, xdot, J, mask, xp=jnp):
+    """Component-leading float arrays with masked samples replaced by harmless values (``xp=np``:
+    on the host)."""
+    qdot, xdot, J = (xp.asarray(a, dtype=jnp.result_type(float)) for a in (qdot, xdot, J))
     lead = qdot.shape[:-1]
-    valid = jnp.ones(lead, bool) if mask is None else jnp.asarray(mask, bool)
+    valid = xp.ones(lead, bool) if mask is None else xp.asarray(mask, bool)
     m, n = J.shape[-2:]
-    safe_J = jnp.eye(m, n, dtype=J.dtype)
-    Jv = jnp.where(valid[..., None, None], J, safe_J)
-    qv = jnp.where(valid[..., None], qdot, 0.0)
-    xv = jnp.where(valid[..., None], xdot, 0.0)
+    safe_J = xp.eye(m, n, dtype=J.dtype)
+    Jv = xp.where(valid[..., None, None], J, safe_J)
+    qv = xp.where(valid[..., None], qdot, 0.0)
+    xv = xp.where(valid[..., None], xdot, 0.0)
     return to_soa(qv), to_soa(xv), to_soa(Jv, 2), valid
 
 
@@ -468,13 +472,13 @@ def estimate_ik_weights(
     n = qdot.shape[-1]
     fixed_t = _fixed_mask(fixed, n)
     batch = tuple(qdot.shape[:-2])
-    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    g = to_jax(np.asarray(gamma, float)) if is_concrete(gamma) else jnp.asarray(gamma, dtype=jnp.result_type(float))
     _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
     arrays = [flatten_batch(qdot, batch, 2), flatten_batch(xdot, batch, 2), flatten_batch(J, batch, 3),
-              np.ones((B, K), bool) if mask is None else mask.reshape(B, K),
-              jnp.broadcast_to(g, batch).reshape(B)]
+              np.ones((B, K), bool) if mask is None else on_host(mask, lambda a: a.reshape(B, K)),
+              flatten_batch(g, batch, 0)]
     if on_invalid not in ("raise", "flag"):
         raise ValueError(f"`on_invalid` must be 'raise' or 'flag', got {on_invalid!r}")
     concrete = is_concrete(*arrays)
@@ -508,15 +512,14 @@ def estimate_ik_weights(
         out = jax.device_put(out, mesh.devices.flat[0])
     if concrete:  # the device arrays may alias the caller's NumPy inputs: finish before returning
         out = jax.block_until_ready(out)
-    unflat = lambda a: a[:B].reshape(batch + a.shape[1:])  # noqa: E731
-    w, err, hist, iters, status, gam = (unflat(a) for a in out)
+    w, err, hist, iters, status, gam = (unflatten_batch(a, batch, B) for a in out)
     if flags is not None and flags.any():
-        fl = jnp.asarray(flags.reshape(batch))
-        status = jnp.where(fl, Status.INVALID_INPUT, status)
-        w = jnp.where(fl[..., None], jnp.nan, w)
-        err = jnp.where(fl, jnp.nan, err)
+        fl = flags.reshape(batch)  # (concrete: on the host)
+        status = to_jax(np.where(fl, np.asarray(Status.INVALID_INPUT, np.asarray(status).dtype), status))
+        w = to_jax(np.where(fl[..., None], np.nan, w))
+        err = to_jax(np.where(fl, np.nan, err))
     return IKWeightsResult(w=w, error=err, error_history=hist, iterations=iters,
-                           converged=status == Status.SUCCESSFUL, gamma=gam, status=status)
+                           converged=on_host(status, lambda s: s == Status.SUCCESSFUL), gamma=gam, status=status)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -653,19 +656,23 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     fixed_t = _fixed_mask(fixed, n)
     free = tuple(i for i in range(n) if not fixed_t[i])
     batch = tuple(qdot.shape[:-2])
-    g = jnp.asarray(gamma, dtype=jnp.result_type(float))
+    g = to_jax(np.asarray(gamma, float)) if is_concrete(gamma) else jnp.asarray(gamma, dtype=jnp.result_type(float))
     _check_gamma_shape(g, batch)
     K = qdot.shape[-2]
     B = int(np.prod(batch)) if batch else 1
-    qf, xf, Jf = qdot.reshape((B, K, n)), xdot.reshape((B, K, -1)), J.reshape((B, K) + tuple(J.shape[-2:]))
-    if is_concrete(qf, xf, Jf, mask):
-        mf = np.ones((B, K), bool) if mask is None else np.asarray(mask, bool).reshape(B, K)
-        _screen(qf, xf, Jf, mf, "raise", 1e-10, batch)
-    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else jnp.asarray(mask).reshape(B, K))
-    g = jnp.broadcast_to(g.astype(qd.dtype), batch).reshape(B)
-    w, cost, steps, status = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free,
-                                       max_steps=int(max_steps))
-    w = jnp.maximum(w, w_min)
+    qf, xf, Jf = (on_host(a, lambda a: a.reshape((B, K) + a.shape[len(batch) + 1:])) for a in (qdot, xdot, J))
+    mf = None if mask is None else on_host(mask, lambda a: a.reshape(B, K))
+    concrete = is_concrete(qf, xf, Jf, mask, g)
+    if concrete:
+        _screen(qf, xf, Jf, np.ones((B, K), bool) if mask is None else np.asarray(mf, bool), "raise", 1e-10, batch)
+    # (concrete: preparation and results on the host, so that the call compiles the kernel only)
+    xp = np if concrete else jnp
+    qd, xd, Jc, valid = _prepare(qf, xf, Jf, None if mask is None else xp.asarray(mf, bool), xp=xp)
+    g = xp.broadcast_to(xp.asarray(g, qd.dtype), batch).reshape(B)
+    out = _lm_batch(qd, xd, Jc, valid.astype(qd.dtype), g, free=free, max_steps=int(max_steps))
+    w, cost, steps, status = jax.device_get(out) if concrete else out
+    w = xp.maximum(w, w_min)
     status = status.reshape(batch)
-    return IKWeightsLMResult(w=w.reshape(batch + (n,)), cost=cost.reshape(batch), steps=steps.reshape(batch),
-                             converged=status == Status.SUCCESSFUL, status=status)
+    w, cost, steps, status, conv = (to_jax(a) if concrete else a for a in (
+        w.reshape(batch + (n,)), cost.reshape(batch), steps.reshape(batch), status, status == Status.SUCCESSFUL))
+    return IKWeightsLMResult(w=w, cost=cost, steps=steps, converged=conv, status=status)

@@ -6,6 +6,10 @@ axis. :func:`broadcast_batch` finds the common batch shape (``ValueError`` namin
 when they do not broadcast), :func:`flatten_batch` brings an array to ``(B, *core)``.
 :func:`bucket` rounds a size up to a power of two and :func:`pad_rows` pads to it, so calls of
 similar size share one compilation.
+
+Concrete arrays (no tracer) are reshaped, padded and sliced in NumPy so that eager calls of the
+public functions compile nothing but their kernel (each eager ``jnp`` op on a new shape costs an
+XLA compilation of 30-100 ms); ``jax.Array`` in, ``jax.Array`` out. Tracers go through ``jnp``.
 """
 
 from __future__ import annotations
@@ -13,8 +17,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .validate import is_concrete, to_jax
 
 
 def broadcast_batch(**arrays: tuple[Any, int]) -> tuple[int, ...]:
@@ -30,17 +37,35 @@ def broadcast_batch(**arrays: tuple[Any, int]) -> tuple[int, ...]:
         raise ValueError(f"leading (batch) axes of {desc} do not broadcast") from e
 
 
+def on_host(a, op):
+    """``op(a)`` for indexing/reshaping: in NumPy for concrete ``a`` (a ``jax.Array`` comes back as
+    one, without an XLA compilation), directly on a tracer."""
+    if not is_concrete(a):
+        return op(a)
+    out = op(np.asarray(a))
+    return out if isinstance(a, np.ndarray) else to_jax(out)
+
+
 def flatten_batch(a, batch: tuple[int, ...], core: int, *, dtype=None, xp=jnp):
     """Broadcast ``a`` (..., *core) to ``batch + core`` and flatten to ``(prod(batch), *core)``
-    (``xp=np`` for NumPy in and out, e.g. for C MuJoCo)."""
+    (``xp=np`` for NumPy in and out, e.g. for C MuJoCo; with ``xp=jnp`` a concrete ``a`` is
+    reshaped in NumPy and returned as a ``jax.Array``)."""
+    if xp is jnp and is_concrete(a):
+        return to_jax(flatten_batch(a, batch, core, dtype=dtype, xp=np))
     a = xp.asarray(a, dtype)
     core_shape = a.shape[a.ndim - core :]
     return xp.broadcast_to(a, batch + core_shape).reshape((math.prod(batch),) + core_shape)
 
 
-def unflatten_batch(a, batch: tuple[int, ...]):
-    """Inverse of :func:`flatten_batch`: ``(B, *core)`` -> ``batch + core``."""
-    return a.reshape(batch + a.shape[1:])
+def unflatten_batch(a, batch: tuple[int, ...], n: int | None = None):
+    """Inverse of :func:`flatten_batch`: the first ``n`` (default all) rows of ``(B, *core)`` ->
+    ``batch + core``."""
+    return on_host(a, lambda a: a[: a.shape[0] if n is None else n].reshape(batch + a.shape[1:]))
+
+
+def head_rows(a, n: int):
+    """``a[:n]`` (the unpadded rows of a kernel's output) without an eager XLA op for concrete ``a``."""
+    return on_host(a, lambda a: a[:n])
 
 
 def bucket(size: int, *, minimum: int = 1) -> int:
@@ -51,7 +76,10 @@ def bucket(size: int, *, minimum: int = 1) -> int:
 def pad_rows(a, size: int, *, axis: int = 0, fill: str = "edge"):
     """Pad ``a`` along ``axis`` to ``size`` entries: ``fill="edge"`` repeats the last entry (a
     valid item: padded lanes then do the same work as a real one and cannot fail differently),
-    ``"zeros"`` appends zeros (for data whose padding is masked out). NumPy in, NumPy out."""
+    ``"zeros"`` appends zeros (for data whose padding is masked out). NumPy in, NumPy out;
+    a concrete ``jax.Array`` is padded in NumPy and returned as a ``jax.Array``."""
+    if not isinstance(a, np.ndarray) and is_concrete(a):
+        return to_jax(pad_rows(np.asarray(a), size, axis=axis, fill=fill))
     xp = np if isinstance(a, np.ndarray) else jnp
     n = a.shape[axis]
     if size < n:
@@ -68,3 +96,22 @@ def pad_rows(a, size: int, *, axis: int = 0, fill: str = "edge"):
     else:
         raise ValueError(f"`fill` must be 'edge' or 'zeros', got {fill!r}")
     return xp.concatenate([a, extra], axis=axis)
+
+
+def eager_rows(fn, x, core: int, *, small: int = 64, chunk: int = 1024):
+    """``fn(x)`` for a row-wise jitted ``fn`` and ``x`` (..., *core) with ``core`` trailing axes.
+
+    A concrete ``x`` is flattened to rows, padded to ``small`` rows or cut into padded chunks of
+    ``chunk`` rows, so that every batch shape shares two compilations of ``fn``; the outputs'
+    leading row axis is unflattened again (``jax.Array``). A tracer goes to ``fn`` as it is.
+    """
+    if not is_concrete(x) or np.size(x) == 0:
+        return fn(x)
+    x = np.asarray(x)
+    batch = x.shape[: x.ndim - core]
+    B = math.prod(batch)
+    Bp = small if B <= small else -(-B // chunk) * chunk
+    flat = pad_rows(x.reshape((B,) + x.shape[x.ndim - core :]), Bp)
+    size = min(Bp, chunk)
+    parts = [jax.device_get(fn(flat[i : i + size])) for i in range(0, Bp, size)]
+    return jax.tree_util.tree_map(lambda *p: to_jax(np.concatenate(p)[:B].reshape(batch + p[0].shape[1:])), *parts)

@@ -121,10 +121,10 @@ def det(M):
 
 
 def to_soa(x, k: int = 1):
-    """Move the last ``k`` (component) axes of ``x`` to the front."""
-    return jnp.moveaxis(x, tuple(range(x.ndim - k, x.ndim)), tuple(range(k)))
+    """Move the last ``k`` (component) axes of ``x`` to the front (NumPy in, NumPy out)."""
+    return x.transpose(tuple(range(x.ndim - k, x.ndim)) + tuple(range(x.ndim - k)))
 
 
 def from_soa(x, k: int = 1):
     """Inverse of :func:`to_soa`."""
-    return jnp.moveaxis(x, tuple(range(k)), tuple(range(x.ndim - k, x.ndim)))
+    return x.transpose(tuple(range(k, x.ndim)) + tuple(range(k)))

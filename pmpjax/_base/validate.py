@@ -13,6 +13,14 @@ def is_concrete(*xs: Any) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
 
 
+def to_jax(x: Any, dtype=None):
+    """``jnp.asarray(x, dtype)``; a NumPy array goes through ``jax.device_put`` (``jnp.asarray``
+    compiles a copy per shape: 30-100 ms for each new shape of an eager call)."""
+    if isinstance(x, np.ndarray | np.generic):
+        return jax.device_put(x if dtype is None else np.asarray(x, dtype))
+    return jax.numpy.asarray(x, dtype)
+
+
 def as_array(name: str, x: Any, *, tail: tuple[int | None, ...] = (), finite: bool = True):
     """Convert ``x`` to a float array with trailing shape ``tail`` (``None`` = any size).
 

@@ -9,16 +9,18 @@ static. How to write your own chain: see :class:`Chain`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import on_host
 from .._base.linalg import det, from_soa, mm, to_soa
 from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
 from .._base.rotations import rotation_matrix
 from .._base.trig import sincos
-from .._base.validate import as_array, check_positive, is_concrete
+from .._base.validate import as_array, check_positive, is_concrete, to_jax
 
 
 class Chain:
@@ -80,9 +82,14 @@ class Chain:
         x, J = jax.vmap(fk)(flat), jax.vmap(jac)(flat)
         return x.T.reshape((self.m,) + batch), jnp.moveaxis(J, 0, -1).reshape((self.m, self.n) + batch)
 
+    #: ``fk``/``jacobian`` of concrete postures in one jitted call (False: chains whose
+    #: ``fk_jac_soa`` runs its own eager chunks, e.g. :class:`pmpjax.MjcfChain`).
+    _jit_eager = True
+
     def _per_item(self, which: int, q):
         if getattr(type(self), "_fk_one", None) is None:
-            return from_soa(self.fk_jac_soa(to_soa(q))[which], which + 1)
+            out = self.fk_jac_soa(on_host(q, to_soa))[which]
+            return on_host(out, lambda a: from_soa(a, which + 1))
         f = self._fk_jac_one()[which]
         flat = q.reshape(-1, self.n)
         out = jax.vmap(f)(flat)
@@ -91,14 +98,14 @@ class Chain:
     def fk(self, q):
         """Task position ``x`` (..., m) of joint angles ``q`` (..., n) [rad]."""
         q = as_array("q", q, tail=(self.n,))
-        return self._per_item(0, jnp.asarray(q))
+        return (_per_item if self._jit_eager else Chain._per_item)(self, 0, to_jax(q))
 
     fk._batched = True
 
     def jacobian(self, q):
         """Task Jacobian ``∂fk/∂q`` (..., m, n) at ``q`` (..., n) (Eq 2)."""
         q = as_array("q", q, tail=(self.n,))
-        return self._per_item(1, jnp.asarray(q))
+        return (_per_item if self._jit_eager else Chain._per_item)(self, 1, to_jax(q))
 
     jacobian._batched = True
 
@@ -131,6 +138,12 @@ def manipulability(chain: Chain, q):
         raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
     q = as_array("q", q, tail=(chain.n,))
     return manipulability_soa(chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1])
+
+
+@partial(jax.jit, static_argnums=1)
+def _per_item(chain, which: int, q):
+    """``fk`` (``which`` 0) or ``jacobian`` (1) of ``q`` (..., n) in one compiled call."""
+    return chain._per_item(which, q)
 
 
 def manipulability_soa(J):

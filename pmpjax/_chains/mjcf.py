@@ -16,9 +16,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import on_host
 from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
-from .._base.validate import is_concrete
+from .._base.validate import is_concrete, to_jax
 from .kinematics import Chain
 
 _SLIDE = 2  # mujoco.mjtJoint.mjJNT_SLIDE
@@ -245,11 +246,12 @@ def _map_rows(kernel, mx, q):
     (inside ``jit``/``grad``/``vmap``) run it once on the whole batch (inlined)."""
     if not is_concrete(q):
         return kernel(mx, q)
+    q = np.asarray(q)  # (padding, chunks and results on the host: no eager XLA ops)
     B = q.shape[0]
     Bp = -(-B // _EAGER_CHUNK) * _EAGER_CHUNK
-    qp = jnp.concatenate([q, jnp.broadcast_to(q[:1], (Bp - B,) + q.shape[1:])]) if Bp > B else q
+    qp = np.concatenate([q, np.broadcast_to(q[:1], (Bp - B,) + q.shape[1:])]) if Bp > B else q
     parts = [kernel(mx, qp[i : i + _EAGER_CHUNK]) for i in range(0, Bp, _EAGER_CHUNK)]
-    return jax.tree_util.tree_map(lambda *p: jnp.concatenate(p)[:B], *parts)
+    return jax.tree_util.tree_map(lambda *p: to_jax(np.concatenate([np.asarray(a) for a in p])[:B]), *parts)
 
 
 @functools.partial(jax.jit, static_argnames=("site_id",))
@@ -282,6 +284,8 @@ class MjcfChain(Chain):
     Only hinge and slide joints (``nq == nv``).
     ``reachable`` accepts points closer to the first joint than 0.99 × the summed link offsets.
     """
+
+    _jit_eager = False  # (fk_jac_soa runs eager chunks of one compiled kernel)
 
     mjx_model: Any
     site_id: int = static_field(default=0)
@@ -329,9 +333,10 @@ class MjcfChain(Chain):
         return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
-        x, J = site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
         batch = qc.shape[1:]
-        return x.T.reshape((3,) + batch), jnp.moveaxis(J, 0, -1).reshape((3, self.n) + batch)
+        x, J = site_jacobians(self.mjx_model, self.site_id, on_host(qc, lambda a: a.reshape(self.n, -1).T))
+        return (on_host(x, lambda a: a.T.reshape((3,) + batch)),
+                on_host(J, lambda a: a.transpose(1, 2, 0).reshape((3, self.n) + batch)))
 
     def reachable(self, x):
         r = np.linalg.norm(np.asarray(x, dtype=float) - np.asarray(self.center), axis=-1)

@@ -30,13 +30,14 @@ from functools import partial
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
 from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, check_spd
+from .._base.validate import as_array, check_positive, check_positive_int, check_spd, is_concrete, to_jax
 from .._chains.kinematics import Chain
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
@@ -159,6 +160,11 @@ def equilibrium_one(
     return q, lam, status, res, steps
 
 
+#: Row counts of eager (concrete) :func:`equilibrium_posture` calls: small batches are padded to
+#: ``_EAGER_SMALL``, larger ones solved in chunks of ``_EAGER_CHUNK``.
+_EAGER_SMALL, _EAGER_CHUNK = 64, 1024
+
+
 @partial(jax.jit, static_argnames=("tol", "max_iter"))
 def _flat_solve(chain, K, qr, x, q0, *, tol, max_iter):
     return jax.vmap(lambda k, r, t, q: equilibrium_one(chain, k, r, t, q, tol=tol, max_iter=max_iter))(
@@ -195,7 +201,8 @@ def equilibrium_posture(
     **Raises:** ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
     NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_iter``.
 
-    **Compile time:** ≈ 3.7 s for the first call of a batch size (bucketed to powers of two), see
+    **Compile time:** ≈ 3.7 s per chain for the first call of up to 64 postures and again for the
+    first larger one (then chunks of 1024; under ``jit`` per power-of-two batch size), see
     benchmarks/compile_times.py.
     """
     if not isinstance(chain, Chain):
@@ -214,12 +221,20 @@ def equilibrium_posture(
     dtype = jnp.result_type(float)
     q0 = q_rest if q_init is None else q_init
     B = math.prod(batch)
-    # Pad the flat batch to a power of two (>= 8) so that calls of similar size share one compile.
-    Bp = bucket(B, minimum=8)
-    flat = [
-        pad_rows(flatten_batch(a, batch, core, dtype=dtype), Bp)
-        for a, core in ((KJ, 2), (q_rest, 1), (target, 1), (q0, 1))
-    ]
-    out = _flat_solve(chain, *flat, tol=float(tol), max_iter=int(max_iter))
-    q, lam, status, res, steps = (unflatten_batch(a[:B], batch) for a in out)
+    args = ((KJ, 2), (q_rest, 1), (target, 1), (q0, 1))
+    opts = dict(tol=float(tol), max_iter=int(max_iter))
+    if is_concrete(chain, KJ, q_rest, target, q0):
+        # Eager: padded to 64 rows or solved in chunks of 1024, so that a chain compiles at most
+        # twice whatever the batch sizes (a compile costs seconds, 1024 wrist rows ≈ 5 ms).
+        Bp = _EAGER_SMALL if B <= _EAGER_SMALL else -(-B // _EAGER_CHUNK) * _EAGER_CHUNK
+        flat = [pad_rows(flatten_batch(a, batch, core, dtype=dtype, xp=np), Bp) for a, core in args]
+        size = min(Bp, _EAGER_CHUNK)
+        chunks = [_flat_solve(chain, *(a[i:i + size] for a in flat), **opts) for i in range(0, Bp, size)]
+        out = [np.concatenate([np.asarray(c[k]) for c in chunks]) for k in range(5)]
+    else:
+        # Traced: padded to a power of two (>= 8) so that calls of similar size share one compile.
+        Bp = bucket(B, minimum=8)
+        out = _flat_solve(chain, *(pad_rows(flatten_batch(a, batch, core, dtype=dtype), Bp) for a, core in args),
+                          **opts)
+    q, lam, status, res, steps = (to_jax(unflatten_batch(a, batch, B)) for a in out)
     return Equilibrium(q=q, lam=lam, status=status, kkt_residual=res, steps=steps)

@@ -20,7 +20,7 @@ import numpy as np
 from .._base.batching import broadcast_batch
 from .._base.linalg import mv, spd_inv, to_soa
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_spd
+from .._base.validate import as_array, check_positive, check_spd, is_concrete, to_jax
 from .._chains.kinematics import Chain
 from .redundancy import admittance_terms_soa, lambda0_soa
 
@@ -38,7 +38,7 @@ class _PMP:
         if not isinstance(self.chain, Chain):
             raise TypeError(f"`chain` must be a pmpjax Chain, got {type(self.chain).__name__}")
         n = self.chain.n
-        object.__setattr__(self, "W", jnp.asarray(as_array("W", self.W, tail=(n, n)), float))
+        object.__setattr__(self, "W", to_jax(as_array("W", self.W, tail=(n, n)), float))
         check_spd("W", self.W)
         if self.elastic:
             KJ = as_array("KJ", self.KJ, tail=(n, n))
@@ -76,8 +76,8 @@ class _PMP:
         """Joint velocity ``q̇`` (..., n) [rad/s] at ``q`` (..., n) [rad] under task force ``F``
         (..., m) [N] (the model's field, Figure 1B); leading axes broadcast with the model's.
         Differentiable in ``q``, ``F`` and the model's leaves."""
-        q = jnp.asarray(as_array("q", q, tail=(self.chain.n,)))
-        F = jnp.asarray(as_array("F", F, tail=(self.chain.m,)))
+        q = to_jax(as_array("q", q, tail=(self.chain.n,)))
+        F = to_jax(as_array("F", F, tail=(self.chain.m,)))
         batch = broadcast_batch(q=(q, 1), F=(F, 1), model=(np.broadcast_to(0.0, self.batch_shape()), 0))
         qc = to_soa(jnp.broadcast_to(q, batch + q.shape[-1:]))
         consts = self.prepare_soa(batch)
@@ -148,6 +148,8 @@ def damping_from_stiffness(KJ, tau0):
         raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
     tau0 = as_array("tau0", tau0)
     check_positive("tau0", tau0)
+    if is_concrete(KJ, tau0):  # (on the host: no eager XLA op)
+        return to_jax(np.asarray(tau0)[..., None, None] * np.asarray(KJ))
     return jnp.asarray(tau0)[..., None, None] * jnp.asarray(KJ)
 
 

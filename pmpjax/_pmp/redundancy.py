@@ -9,11 +9,14 @@ are what integrators and fits call; the public functions take batch-leading arra
 
 from __future__ import annotations
 
+from functools import partial
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
-from .._base.validate import as_array, check_positive, check_spd
+from .._base.validate import as_array, check_positive, check_spd, to_jax
 
 
 def admittance_terms_soa(J, A):
@@ -65,21 +68,29 @@ def lambda0_soa(J, M, A_tau):
     return spd_solve(M, mv(J, A_tau))
 
 
-def _admittance(J, W, w):
+def _check_weights(J, W, w):
+    """Validated ``W`` (..., n, n) or ``w`` (..., n) as arrays (the other None)."""
     n = J.shape[-1]
     if (W is None) == (w is None):
         raise ValueError("give exactly one of `W` (..., n, n) or diagonal weights `w` (..., n)")
     if w is not None:
-        w = jnp.asarray(as_array("w", w, tail=(n,)))
+        w = to_jax(as_array("w", w, tail=(n,)))
         check_positive("w", w)
-        return to_soa(jnp.eye(n).reshape((1,) * (w.ndim - 1) + (n, n)) / w[..., None, :], 2)
-    W = jnp.asarray(as_array("W", W, tail=(n, n)))
+        return None, w
+    W = to_jax(as_array("W", W, tail=(n, n)))
     check_spd("W", W)
+    return W, None
+
+
+def _admittance(n, W, w):
+    """``A = W⁻¹`` (n, n, ...) component-leading, from checked ``W`` or ``w``."""
+    if w is not None:
+        return to_soa(jnp.eye(n).reshape((1,) * (w.ndim - 1) + (n, n)) / w[..., None, :], 2)
     return spd_inv(to_soa(W, 2))
 
 
 def _check_J(J):
-    J = jnp.asarray(as_array("J", J))
+    J = to_jax(as_array("J", J))
     if J.ndim < 2:
         raise ValueError(f"`J` must have shape (..., m, n), got {J.shape}")
     if J.shape[-2] > J.shape[-1]:
@@ -99,34 +110,47 @@ def _bcast(J, A):
     return pad(J), pad(A)
 
 
+def _operator(which, J, W=None, w=None, tau_el=None):
+    """Validate, then evaluate operator ``which`` in one compiled call (eager calls compile once
+    per shape instead of once per ``jnp`` op)."""
+    J = _check_J(J)
+    W, w = _check_weights(J, W, w)
+    if tau_el is not None:
+        tau_el = to_jax(as_array("tau_el", tau_el, tail=(J.shape[-1],)))
+    return _operator_jit(which, J, W, w, tau_el)
+
+
+@partial(jax.jit, static_argnums=0)
+def _operator_jit(which, J, W, w, tau_el):
+    n = J.shape[-1]
+    Js, A = _bcast(to_soa(J, 2), _admittance(n, W, w))
+    if which == "pinv":
+        return from_soa(pinv_soa(Js, A), 2)
+    if which == "null":
+        eye = jnp.eye(n).reshape((n, n) + (1,) * (Js.ndim - 2))
+        return from_soa(eye - mm(pinv_soa(Js, A), Js), 2)
+    if which == "damping":
+        return from_soa(spd_inv(admittance_terms_soa(Js, A)[1]), 2)
+    tau = to_soa(jnp.broadcast_to(tau_el, J.shape[:-2] + J.shape[-1:]))
+    P, M = admittance_terms_soa(Js, A)
+    return from_soa(lambda0_soa(Js, M, mv(A, tau)))
+
+
 def weighted_pinv(J, W=None, *, w=None):
     """W-weighted pseudo-inverse ``W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` (..., n, m) (Eq 3)."""
-    J = _check_J(J)
-    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
-    return from_soa(pinv_soa(Js, A), 2)
+    return _operator("pinv", J, W, w)
 
 
 def nullspace_projector(J, W=None, *, w=None):
     """``I − J#_W J`` (..., n, n): projects joint velocities onto motions that leave x still."""
-    J = _check_J(J)
-    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
-    n = J.shape[-1]
-    eye = jnp.eye(n).reshape((n, n) + (1,) * (Js.ndim - 2))
-    return from_soa(eye - mm(pinv_soa(Js, A), Js), 2)
+    return _operator("null", J, W, w)
 
 
 def task_damping(J, W=None, *, w=None):
     """Task-space damping ``B = (J W⁻¹ Jᵀ)⁻¹`` (..., m, m) (Eq 3)."""
-    J = _check_J(J)
-    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, w))
-    return from_soa(spd_inv(admittance_terms_soa(Js, A)[1]), 2)
+    return _operator("damping", J, W, w)
 
 
 def lambda0(J, W, tau_el):
     """Task force ``λ0 = B J W⁻¹ τ_el`` (..., m) that blocks ``τ_el`` (..., n) in task space (Eq 4)."""
-    J = _check_J(J)
-    Js, A = _bcast(to_soa(J, 2), _admittance(J, W, None))
-    tau_el = jnp.asarray(as_array("tau_el", tau_el, tail=(J.shape[-1],)))
-    tau = to_soa(jnp.broadcast_to(tau_el, J.shape[:-2] + J.shape[-1:]))
-    P, M = admittance_terms_soa(Js, A)
-    return from_soa(lambda0_soa(Js, M, mv(A, tau)))
+    return _operator("lambda0", J, W, None, tau_el)

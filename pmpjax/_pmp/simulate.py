@@ -14,11 +14,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .._base.batching import flatten_batch
+from .._base.batching import flatten_batch, on_host
 from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
-from .._base.validate import as_array, check_positive_int, is_concrete, positive_float
+from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax
 from .._chains.kinematics import manipulability_soa
 from .integrate import integrate_observed
 from .models import _PMP
@@ -71,6 +71,8 @@ class Trajectory:
     @property
     def speed(self):
         """Tangential task speed ``|ẋ|`` (..., S)."""
+        if is_concrete(self.xdot):
+            return to_jax(np.linalg.norm(np.asarray(self.xdot), axis=-1))
         return jnp.linalg.norm(self.xdot, axis=-1)
 
     @property
@@ -124,8 +126,15 @@ def _rates(model, q0, *, batch):
 
 
 def check_rk4_stability(model, planner, q0, batch, h):
-    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0."""
-    lam, g_null = (np.asarray(v) for v in _rates(model, q0, batch=batch))
+    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0.
+
+    Concrete ``model``, ``q0`` inside a caller's ``jit``/``vmap``/``grad`` are evaluated eagerly
+    (outside any trace no ``ensure_compile_time_eval``: it would compile each constant op apart)."""
+    rates = _rates(model, q0, batch=batch)
+    if not is_concrete(rates):
+        with jax.ensure_compile_time_eval():
+            rates = _rates(model, q0, batch=batch)
+    lam, g_null = (np.asarray(v) for v in rates)
     if np.any(lam[..., 0] <= 0):
         raise ValueError("`q0` is at a singular posture: J W⁻¹ Jᵀ is not positive definite")
     g = planner.max_gain()
@@ -176,8 +185,8 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         raise TypeError(f"`planner` must be a pmpjax Planner, got {type(planner).__name__}")
     chain = model.chain
     n, m = chain.n, chain.m
-    q0 = jnp.asarray(as_array("q0", q0, tail=(n,)), float)
-    targets = jnp.asarray(as_array("targets", targets, tail=(None, m)), float)
+    q0 = to_jax(as_array("q0", q0, tail=(n,)), float)
+    targets = to_jax(as_array("targets", targets, tail=(None, m)), float)
     chain.check_target("targets", targets)
     duration = positive_float("duration", duration)
     dt = positive_float("dt", dt)
@@ -186,16 +195,13 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
     if is_concrete(model, planner, q0):
-        # Concrete inputs inside a caller's jit/vmap/grad: evaluate the check eagerly instead of
-        # tracing it (its jitted rate estimate would otherwise return tracers).
-        with jax.ensure_compile_time_eval():
-            check_rk4_stability(model, planner, q0, batch, max(sched.hs))
+        check_rk4_stability(model, planner, q0, batch, max(sched.hs))
     # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
     h = sched.hs[0] if len(set(sched.hs)) == 1 else None
     kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
                      singular_tol=float(singular_tol), single=single)
-    out = kernel(model, planner, q0, targets, jnp.asarray(sched.t0s), jnp.asarray(sched.hs))
-    return replace(out, t=jnp.asarray(sched.t))
+    out = kernel(model, planner, q0, targets, np.asarray(sched.t0s), np.asarray(sched.hs))
+    return replace(out, t=to_jax(np.asarray(sched.t)))
 
 
 @functools.lru_cache(maxsize=256)
@@ -354,7 +360,7 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
-    return _simulate(model, planner, q0, jnp.asarray(target)[..., None, :], duration, dt, saveat,
+    return _simulate(model, planner, q0, on_host(to_jax(target), lambda a: a[..., None, :]), duration, dt, saveat,
                      singular_tol, True)
 
 

@@ -39,10 +39,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import flatten_batch
+from .._base.batching import flatten_batch, on_host
 from .._base.mujoco import import_mjx, import_mujoco, load_spec
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive_int, is_concrete, to_jax
 from .._chains.mjcf import gravity_from_kinematics, kinematics
 
 JOINTS = ("sh_flex", "sh_abd", "sh_rot", "el_flex", "wr_flex", "wr_dev")
@@ -508,13 +508,13 @@ def run_controller(
     n = arm.n
     T = check_positive_int("n_steps", n_steps)
     K, B = check_gains(arm, arm.K if K is None else K, arm.B if B is None else B)
-    q0 = jnp.asarray(as_array("q0", arm.q_rest if q0 is None else q0, tail=(n,)), float)
-    qdot0 = jnp.asarray(as_array("qdot0", np.zeros(n) if qdot0 is None else qdot0, tail=(n,)), float)
-    q_set0 = q0 if q_set0 is None else jnp.asarray(as_array("q_set0", q_set0, tail=(n,)), float)
+    q0 = to_jax(as_array("q0", arm.q_rest if q0 is None else q0, tail=(n,)), float)
+    qdot0 = to_jax(as_array("qdot0", np.zeros(n) if qdot0 is None else qdot0, tail=(n,)), float)
+    q_set0 = q0 if q_set0 is None else to_jax(as_array("q_set0", q_set0, tail=(n,)), float)
     probe = np.broadcast_to(PROBE_PARK, (T, 3)) if probe is None else probe
     force = np.zeros((T, 3)) if force is None else force
-    probe = jnp.asarray(as_array("probe", probe, tail=(T, 3)), float)
-    force = jnp.asarray(as_array("force", force, tail=(T, 3)), float)
+    probe = to_jax(as_array("probe", probe, tail=(T, 3)), float)
+    force = to_jax(as_array("force", force, tail=(T, 3)), float)
     try:
         batch = tuple(
             np.broadcast_shapes(
@@ -596,9 +596,9 @@ def rollout(
     q_set = as_array("q_set", q_set, tail=(None, arm.n))
     if q_set.shape[-2] < 1:
         raise ValueError(f"`q_set` must have at least one step, got shape {q_set.shape}")
-    q_set = jnp.asarray(q_set, float)
+    q_set = to_jax(q_set, float)
     if q0 is None:
-        q0 = q_set[..., 0, :]
+        q0 = on_host(q_set, lambda a: a[..., 0, :])
     if backend == "mjx":
         return run_controller(
             arm,

@@ -27,12 +27,13 @@ def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
     joint = _check_joint(joint, start.shape[-1])
     fig, (ax_p, ax_v) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
     base = start.copy()
-    for j in range(np.shape(moves.delta)[0]):
-        one = Moves(t0=moves.t0[j : j + 1], duration=moves.duration[j : j + 1], delta=moves.delta[j : j + 1])
+    t0, dur, delta = (np.asarray(a) for a in (moves.t0, moves.duration, moves.delta))  # (host-side slices)
+    for j in range(delta.shape[0]):
+        one = Moves(t0=t0[j : j + 1], duration=dur[j : j + 1], delta=delta[j : j + 1])
         p, v = summed_moves(one, base, t)
         ax_p.plot(t, np.asarray(p)[:, joint], lw=1, label=f"move {j + 1}")
         ax_v.plot(t, np.asarray(v)[:, joint], lw=1)
-        base = base + np.asarray(moves.delta[j])
+        base = base + delta[j]
     ax_p.plot(t, np.asarray(p_all)[:, joint], "k:", lw=2, label="sum")
     ax_v.plot(t, np.asarray(v_all)[:, joint], "k:", lw=2)
     ax_p.set_ylabel("set-point [rad]")

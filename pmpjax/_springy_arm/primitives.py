@@ -18,11 +18,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows
+from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive, check_positive_int, is_concrete, to_jax
 from .._chains.mjcf import MjcfChain, gravity_gradients, gravity_terms, site_position
 from .._pmp.redundancy import weighted_pinv
 from .arm import CogArm, check_arm
@@ -43,12 +43,12 @@ PRIMITIVES = (
 
 def default_primitives():
     """The four primitives ``P`` (4, 6) [rad] named in ``PRIMITIVE_NAMES`` (rest, down, up, side)."""
-    return jnp.asarray(PRIMITIVES, dtype=float)
+    return to_jax(np.asarray(PRIMITIVES, dtype=float))
 
 
 def check_set_point(name: str, q_set, n: int):
     """``q_set`` (..., n) finite set-point(s) [rad]; raises ``ValueError`` naming ``name``."""
-    return jnp.asarray(as_array(name, q_set, tail=(n,)), float)
+    return to_jax(as_array(name, q_set, tail=(n,)), float)
 
 
 def check_stiffness(name: str, K, n: int):
@@ -76,7 +76,12 @@ def winner_take_all(scores, P):
     """Winner-take-all: the primitive ``P[argmax(scores)]`` (..., n) of ``P`` (k, n) for
     activation ``scores`` (..., k) — one primitive has control of the arm."""
     P = _check_primitives(P)
-    scores = jnp.asarray(as_array("scores", scores, tail=(P.shape[-2],)), float)
+    scores = to_jax(as_array("scores", scores, tail=(P.shape[-2],)), float)
+    return _winner(scores, P)
+
+
+@jax.jit
+def _winner(scores, P):
     onehot = jax.nn.one_hot(jnp.argmax(scores, axis=-1), P.shape[-2], dtype=P.dtype)
     return jnp.einsum("...k,...kn->...n", onehot, P)
 
@@ -169,17 +174,12 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     qs, Ks = flatten_batch(q_set, batch, 1), flatten_batch(K, batch, 1)
     Bp = bucket(B, minimum=8)
     q, hand, res, status = (
-        a[:B]
+        unflatten_batch(a, batch, B)
         for a in _equilibrium_batch(
             arm.mjx_model, arm.layout.hand_site, pad_rows(qs, Bp), pad_rows(Ks, Bp), n_iter, float(tol)
         )
     )
-    return ArmEquilibrium(
-        q=q.reshape(batch + (n,)),
-        hand=hand.reshape(batch + (3,)),
-        residual=res.reshape(batch),
-        status=status.reshape(batch),
-    )
+    return ArmEquilibrium(q=q, hand=hand, residual=res, status=status)
 
 
 def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
@@ -229,12 +229,13 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
         batch = tuple(np.broadcast_shapes(q.shape, q_set.shape, K.shape))
     except ValueError as e:
         raise ValueError(f"leading axes of `q` {q.shape}, `q_set` {q_set.shape}, `K` {K.shape} do not broadcast") from e
-    q = jnp.broadcast_to(q, batch)
-    tau = -jnp.broadcast_to(K, batch) * (q - jnp.broadcast_to(q_set, batch))
+    xp = np if is_concrete(q, q_set, K) else jnp  # (the spring torque on the host: no eager XLA ops)
+    q = xp.broadcast_to(xp.asarray(q), batch)
+    tau = -xp.broadcast_to(xp.asarray(K), batch) * (q - xp.broadcast_to(xp.asarray(q_set), batch))
     if gravity:
-        tau = tau - gravity_gradients(chain.mjx_model, q.reshape(-1, n)).reshape(batch)
+        tau = tau - xp.asarray(gravity_gradients(chain.mjx_model, q.reshape(-1, n))).reshape(batch)
     J = chain.jacobian(q)
-    Jp = weighted_pinv(J, w=jnp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
+    Jp = weighted_pinv(J, w=xp.ones(J.shape[:-2] + (n,)))  # (..., n, 3), unweighted
     return jnp.einsum("...nm,...n->...m", Jp, tau)
 
 
@@ -269,11 +270,11 @@ def moves_from_targets(start, targets, t0, duration) -> Moves:
     """Moves from ``start`` (n,) through ``targets`` (M, n) issued at times ``t0`` (M,) with
     durations ``duration`` (M,) [s] (scalars broadcast): each new move goes from the previous
     *target* to the new one (not from where the arm is), as on Cog."""
-    start = jnp.asarray(as_array("start", start, tail=(None,)), float)
+    start = to_jax(as_array("start", start, tail=(None,)), float)
     if start.ndim != 1:
         raise ValueError(f"`start` must be one set-point (n,), got shape {start.shape}")
     n = start.shape[-1]
-    targets = jnp.asarray(as_array("targets", targets, tail=(None, n)), float)
+    targets = to_jax(as_array("targets", targets, tail=(None, n)), float)
     if targets.ndim != 2:
         raise ValueError(f"`targets` must be (M, {n}), got shape {targets.shape}")
     M = targets.shape[-2]
@@ -282,6 +283,12 @@ def moves_from_targets(start, targets, t0, duration) -> Moves:
         if np.shape(v) not in ((), (M,)):
             raise ValueError(f"`{name}` must be a scalar or ({M},) (one per target), got shape {np.shape(v)}")
     check_positive("duration", duration)
+    if is_concrete(start, targets, t0, duration):  # (on the host: no eager XLA ops)
+        start, targets = np.asarray(start), np.asarray(targets)
+        prev = np.concatenate([start[None], targets[:-1]], axis=0)
+        return Moves(t0=to_jax(np.broadcast_to(np.asarray(t0, float), (M,))),
+                     duration=to_jax(np.broadcast_to(np.asarray(duration, float), (M,))),
+                     delta=to_jax(targets - prev))
     prev = jnp.concatenate([start[None], targets[:-1]], axis=0)
     return Moves(
         t0=jnp.broadcast_to(jnp.asarray(t0, float), (M,)),
@@ -300,14 +307,18 @@ def _check_times(t):
     t = as_array("t", t)
     if t.ndim != 1:
         raise ValueError(f"`t` must be a 1-D array of times (T,) [s], got shape {t.shape}")
-    return jnp.asarray(t, float)
+    return to_jax(t, float)
 
 
 def move_velocity(moves: Moves, t):
     """Summed set-point velocity (T, n) [rad/s] at times ``t`` (T,) of all ``moves``:
     ``Σ_j Δ_j / d_j · (30 s⁴ − 60 s³ + 30 s²)``, ``s = (t − t0_j) / d_j``."""
     _check_moves(moves)
-    t = _check_times(t)
+    return _move_velocity(moves, _check_times(t))
+
+
+@jax.jit
+def _move_velocity(moves, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]  # (T, M)
     return (minimum_jerk(s)[1] / moves.duration[None, :]) @ moves.delta
 
@@ -322,7 +333,10 @@ def summed_moves(moves: Moves, start, t):
     start = as_array("start", start, tail=(n,))
     if start.ndim != 1:
         raise ValueError(f"`start` must be one set-point ({n},), got shape {start.shape}")
-    start = jnp.asarray(start, float)
-    t = _check_times(t)
+    return _summed_moves(moves, to_jax(start, float), _check_times(t))
+
+
+@jax.jit
+def _summed_moves(moves, start, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]
-    return start[None, :] + minimum_jerk(s)[0] @ moves.delta, move_velocity(moves, t)
+    return start[None, :] + minimum_jerk(s)[0] @ moves.delta, _move_velocity(moves, t)

@@ -36,7 +36,7 @@ import numpy as np
 
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass, static_field
-from .._base.validate import as_array, check_positive, check_positive_int, is_concrete
+from .._base.validate import as_array, check_positive, check_positive_int, is_concrete, to_jax
 from .arm import ArmTrajectory, CogArm, check_arm, run_controller
 
 REACH, GRASP, WITHDRAW, LEAD = 0, 1, 2, 3
@@ -60,8 +60,8 @@ class ReflexInputs:
         target = as_array("target", self.target, tail=(None, None))
         T = target.shape[-2]
         for name in ("new_target", "lead", "release"):
-            object.__setattr__(self, name, jnp.asarray(as_array(name, getattr(self, name), tail=(T,)), float))
-        object.__setattr__(self, "touch", jnp.asarray(as_array("touch", self.touch, tail=(T, 2)), float))
+            object.__setattr__(self, name, to_jax(as_array(name, getattr(self, name), tail=(T,)), float))
+        object.__setattr__(self, "touch", to_jax(as_array("touch", self.touch, tail=(T, 2)), float))
         object.__setattr__(self, "target", jnp.asarray(target, float))
 
 
@@ -121,7 +121,7 @@ def script_inputs(arm: CogArm, duration: float, *, targets=(), lead=(), release=
             raise ValueError(f"`touch` forces must be non-negative [N], got {force}")
         sel = (t >= t0) & (t < t1)
         touch_a[sel] = np.maximum(touch_a[sel], force)
-    return ReflexInputs(*(jnp.asarray(a) for a in (target, new, lead_a, rel, touch_a)))
+    return ReflexInputs(*(to_jax(np.asarray(a)) for a in (target, new, lead_a, rel, touch_a)))
 
 
 @pytree_dataclass
@@ -176,7 +176,7 @@ class ReflexNetwork:
         if np.any(np.asarray(gd) < 0):
             raise ValueError(f"`grasp_damping` must be non-negative, got {np.asarray(gd)}")
         check_positive_int("slots", self.slots)
-        object.__setattr__(self, "rest", jnp.asarray(as_array("rest", self.rest, tail=(None,)), float))
+        object.__setattr__(self, "rest", to_jax(as_array("rest", self.rest, tail=(None,)), float))
 
     def init(self, q_set0):
         S, n = self.slots, q_set0.shape[-1]
@@ -348,4 +348,5 @@ def stack_inputs(inputs) -> ReflexInputs:
     shapes = {tuple(np.shape(i.target)) for i in inputs}
     if len(shapes) != 1:
         raise ValueError(f"`inputs` must all have the same shape (same T and n), got {sorted(shapes)}")
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *inputs)
+    return jax.tree_util.tree_map(lambda *a: to_jax(np.stack([np.asarray(x) for x in a])) if is_concrete(a)
+                                  else jnp.stack(a), *inputs)

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.validate import as_array
+from .._base.validate import as_array, to_jax
 
 
 def curvature_areas(path, start, end):
@@ -28,12 +28,16 @@ def curvature_areas(path, start, end):
     (``curvature_measures``). Differentiable in all arguments (except where the line has zero
     length).
     """
-    path = jnp.asarray(as_array("path", path, tail=(None, 2)))
-    start = jnp.asarray(as_array("start", start, tail=(2,)))
-    end = jnp.asarray(as_array("end", end, tail=(2,)))
+    return _areas(*_check_line(path, start, end))
+
+
+def _check_line(path, start, end):
+    path = to_jax(as_array("path", path, tail=(None, 2)))
+    start = to_jax(as_array("start", start, tail=(2,)))
+    end = to_jax(as_array("end", end, tail=(2,)))
     if path.shape[-2] < 2:
         raise ValueError(f"`path` needs at least 2 samples, got shape {path.shape}")
-    return _areas(path, start, end)
+    return path, start, end
 
 
 @jax.jit
@@ -66,5 +70,11 @@ def curvature_measures(path, start, end, *, scale: float = np.pi / 12):
     ``scale`` is the nominal target-to-target distance (paper: π/12, the default target radius
     of ``center_out_targets``). See :func:`curvature_areas` for the convention on open paths.
     """
-    a_r, a_l = curvature_areas(path, start, end)
+    path, start, end = _check_line(path, start, end)
+    return _measures(path, start, end, scale)
+
+
+@jax.jit
+def _measures(path, start, end, scale):
+    a_r, a_l = _areas(path, start, end)
     return (a_r + a_l) / scale**2, (a_r - a_l) / scale**2

@@ -12,12 +12,15 @@ pointing targets.
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.batching import on_host
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_positive_int
+from .._base.validate import as_array, check_positive, check_positive_int, to_jax
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .orientation import rotvec_from_joint_angles
@@ -48,9 +51,14 @@ def _design(r_y, r_z):
 def evaluate_surface(coef, r_y, r_z):
     """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²`` [rad]; ``coef`` (..., 6), ``r_y``,
     ``r_z`` [rad] broadcast against ``coef[..., 0]``."""
-    coef = jnp.asarray(as_array("coef", coef, tail=(6,)))
-    r_y = jnp.asarray(as_array("r_y", r_y), coef.dtype)
-    r_z = jnp.asarray(as_array("r_z", r_z), coef.dtype)
+    coef = to_jax(as_array("coef", coef, tail=(6,)))
+    r_y = to_jax(as_array("r_y", r_y), coef.dtype)
+    r_z = to_jax(as_array("r_z", r_z), coef.dtype)
+    return _evaluate(coef, r_y, r_z)
+
+
+@jax.jit
+def _evaluate(coef, r_y, r_z):
     shape = jnp.broadcast_shapes(coef.shape[:-1], r_y.shape, r_z.shape)
     A = _design(jnp.broadcast_to(r_y, shape), jnp.broadcast_to(r_z, shape))
     return jnp.sum(A * jnp.broadcast_to(coef, shape + (6,)), axis=-1)
@@ -61,12 +69,17 @@ def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 
 
     Returns ``(r_y (n, n), r_z (n, n), r_x (..., n, n))``."""
     coef = surface_or_coef.coef if isinstance(surface_or_coef, DondersSurface) else surface_or_coef
-    coef = jnp.asarray(as_array("surface_or_coef", coef, tail=(6,)))
+    coef = to_jax(as_array("surface_or_coef", coef, tail=(6,)))
     check_positive("extent", extent)
     n = check_positive_int("n", n)
+    return _surface_grid(coef, extent, n)
+
+
+@partial(jax.jit, static_argnums=2)
+def _surface_grid(coef, extent, n):
     g = jnp.linspace(-extent, extent, n)
     ry, rz = jnp.meshgrid(g, g, indexing="ij")
-    return ry, rz, evaluate_surface(coef[..., None, None, :], ry, rz)
+    return ry, rz, _evaluate(coef[..., None, None, :], ry, rz)
 
 
 @jax.jit
@@ -133,9 +146,10 @@ def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = No
     if np.ndim(pointing) != 2:
         raise ValueError(f"`pointing` must have shape (P, 2), got {np.shape(pointing)}")
     chain.check_target("pointing", pointing)
-    KJ = jnp.asarray(as_array("KJ", KJ, tail=(3, 3)))
-    q_rest = jnp.asarray(as_array("q_rest", q_rest, tail=(3,)))
-    q = equilibrium_posture(chain, KJ[..., None, :, :], q_rest[..., None, :], pointing).q
+    KJ = to_jax(as_array("KJ", KJ, tail=(3, 3)))
+    q_rest = to_jax(as_array("q_rest", q_rest, tail=(3,)))
+    KJ, q_rest = on_host(KJ, lambda a: a[..., None, :, :]), on_host(q_rest, lambda a: a[..., None, :])
+    q = equilibrium_posture(chain, KJ, q_rest, pointing).q
     r = rotvec_from_joint_angles(q)
     return fit_donders_surface(r), r, q
 

@@ -155,9 +155,9 @@ def synthetic_recordings(
     if not np.all(np.isfinite(np.asarray(q))):
         raise ValueError("`KJ`, `q_rest`: some equilibrium postures could not be computed (non-finite)")
     eps = rng.normal(size=(S, n_samples, 3)) * (np.deg2rad(noise)[:, None, None] / np.sqrt(3.0))
-    R = wrist_rotation(q) @ matrix_from_rotvec(eps)
+    R = np.asarray(wrist_rotation(q)) @ np.asarray(matrix_from_rotvec(eps))
     quat = np.asarray(quat_from_matrix(R))
-    pointing = np.asarray(d * np.stack([-R[..., 1, 0], R[..., 2, 0]], -1))
+    pointing = d * np.stack([-R[..., 1, 0], R[..., 2, 0]], -1)
     return DondersRecording(names, quat, pointing, np.ones((S, n_samples), bool), float(d))
 
 

@@ -13,22 +13,28 @@ Conventions (all functions take leading batch axes and are differentiable):
   ``(q_PS + π, π − q_FE, q_RUD + π)`` gives the same ``R`` and is never returned.
 
 Inputs are checked before tracing (``ValueError`` naming the argument for a wrong trailing shape,
-or NaN/inf when concrete; a zero quaternion is rejected).
+or NaN/inf when concrete; a zero quaternion is rejected); each function then makes one jitted call,
+on rows padded to 64 or in chunks of 1024 when eager (``eager_rows``: two compilations for every
+batch shape, not one per ``jnp`` op and shape).
 """
 
 from __future__ import annotations
 
+from functools import partial
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.validate import as_array, is_concrete
+from .._base.batching import eager_rows
+from .._base.validate import as_array, is_concrete, to_jax
 from .._chains.kinematics import Wrist
 
 _WRIST = Wrist()
 
 
 def _arr(name, x, tail):
-    return jnp.asarray(as_array(name, x, tail=tail))
+    return to_jax(as_array(name, x, tail=tail))
 
 
 def _quat(name, quat):
@@ -45,7 +51,12 @@ def _convention(convention):
 
 def wrist_rotation(q):
     """Hand orientation ``R(q)`` (..., 3, 3) of wrist joint angles ``q`` (..., 3) [rad] (Eq 6)."""
-    return _WRIST.rotation(_arr("q", q, (3,)))
+    return eager_rows(_rotation, _arr("q", q, (3,)), 1)
+
+
+@jax.jit
+def _rotation(q):
+    return _WRIST.rotation(q)
 
 
 def _hat(r):
@@ -60,7 +71,11 @@ def quat_from_matrix(R):
     Shepperd's method: the largest of ``(w², x², y², z²)`` is computed from the diagonal and the
     others from off-diagonal sums, so the result is accurate for every rotation.
     """
-    R = _arr("R", R, (3, 3))
+    return eager_rows(_quat_from_matrix, _arr("R", R, (3, 3)), 2)
+
+
+@jax.jit
+def _quat_from_matrix(R):
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     tr = m00 + m11 + m22
     d = jnp.stack([tr, m00 - m11 - m22, -m00 + m11 - m22, -m00 - m11 + m22], -1)
@@ -85,7 +100,11 @@ def quat_from_matrix(R):
 
 def matrix_from_quat(quat):
     """Rotation matrix (..., 3, 3) of quaternions ``(w, x, y, z)`` (..., 4) (normalised first)."""
-    quat = _quat("quat", quat)
+    return eager_rows(_matrix_from_quat, _quat("quat", quat), 1)
+
+
+@jax.jit
+def _matrix_from_quat(quat):
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     w, x, y, z = (quat[..., i] for i in range(4))
     return jnp.stack(
@@ -102,7 +121,11 @@ def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
     """Rotation vector (..., 3) of quaternions (..., 4); ``convention`` "axis_angle" (θ n, rad)
     or "rodrigues" (tan(θ/2) n)."""
     _convention(convention)
-    quat = _quat("quat", quat)
+    return eager_rows(lambda q: _rotvec_from_quat(q, convention), _quat("quat", quat), 1)
+
+
+@partial(jax.jit, static_argnums=1)
+def _rotvec_from_quat(quat, convention):
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     quat = jnp.where(quat[..., :1] < 0, -quat, quat)
     w, v = quat[..., 0], quat[..., 1:]
@@ -118,7 +141,11 @@ def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
 
 def quat_from_rotvec(r):
     """Quaternion ``(w, x, y, z)`` (..., 4) of axis·angle rotation vectors ``r`` (..., 3) [rad]."""
-    r = _arr("r", r, (3,))
+    return eager_rows(_quat_from_rotvec, _arr("r", r, (3,)), 1)
+
+
+@jax.jit
+def _quat_from_rotvec(r):
     t2 = jnp.sum(r * r, axis=-1)
     small = t2 < 1e-8
     t = jnp.sqrt(jnp.where(small, 1.0, t2))
@@ -146,7 +173,11 @@ def joint_angles_from_matrix(R):
     ``(R[1,1], R[2,1]) = cos b (cos a, −sin a)``. Branch ``|q_FE| < π/2``; undefined at gimbal lock
     ``|q_FE| = π/2`` (the wrist points along the screen, outside every reachable target).
     """
-    R = _arr("R", R, (3, 3))
+    return eager_rows(_joint_angles_from_matrix, _arr("R", R, (3, 3)), 2)
+
+
+@jax.jit
+def _joint_angles_from_matrix(R):
     b = jnp.arctan2(-R[..., 0, 1], jnp.hypot(R[..., 0, 0], R[..., 0, 2]))
     c = jnp.arctan2(R[..., 0, 2], R[..., 0, 0])
     a = jnp.arctan2(-R[..., 2, 1], R[..., 1, 1])
@@ -175,6 +206,10 @@ def torsion_between(R_ref, R):
     For two postures pointing the same way, ``R_refᵀ R`` is a pure rotation about ``e_x`` and this
     is exactly its angle; otherwise it is the torsional component ``atan2(M21 − M12, M11 + M22)``.
     """
-    R_ref, R = _arr("R_ref", R_ref, (3, 3)), _arr("R", R, (3, 3))
+    return _torsion_between(_arr("R_ref", R_ref, (3, 3)), _arr("R", R, (3, 3)))
+
+
+@jax.jit
+def _torsion_between(R_ref, R):
     M = jnp.swapaxes(R_ref, -1, -2) @ R
     return jnp.arctan2(M[..., 2, 1] - M[..., 1, 2], M[..., 1, 1] + M[..., 2, 2])

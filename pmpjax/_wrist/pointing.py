@@ -45,9 +45,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import bucket, pad_rows
+from .._base.batching import bucket, head_rows, pad_rows
 from .._base.pytree import replace
-from .._base.validate import check_positive_int
+from .._base.validate import check_positive_int, is_concrete
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .._pmp.models import Lambda0PMP
@@ -410,12 +410,13 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
     """
     B = np.shape(q0)[0]
     Bp = bucket(B, minimum=16) if pad else B
-    KJ, q_rest, r0, r, q0, target = (pad_rows(jnp.asarray(a, float), Bp)
-                                     for a in (KJ, q_rest, tau0_ratio, tau_ratio, q0, target))
+    args = (KJ, q_rest, tau0_ratio, tau_ratio, q0, target)
+    xp = np if is_concrete(*args) else jnp  # (padding concrete inputs in NumPy compiles nothing)
+    KJ, q_rest, r0, r, q0, target = (pad_rows(xp.asarray(a, float), Bp) for a in args)
     model = Lambda0PMP(Wrist(d), KJ=KJ, q_rest=q_rest, W=r0[:, None, None] * KJ)
     tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span), dt=float(dt))
-    return replace(tr, q=tr.q[:B], x=tr.x[:B], qdot=tr.qdot[:B], xdot=tr.xdot[:B],
-                   manipulability=tr.manipulability[:B], status=tr.status[:B])
+    return replace(tr, **{k: head_rows(getattr(tr, k), B)
+                          for k in ("q", "x", "qdot", "xdot", "manipulability", "status")})
 
 
 #: Default simulation grid of pointing movements, in units of the movement's duration T: the
