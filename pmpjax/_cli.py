@@ -239,21 +239,6 @@ PART_SECONDS = {"pointing": 88, "donders_nio": 50, "reaching": 50, "sweeps": 44,
                 "ik_synthetic": 19, "ik_figures": 14, "ik_hugmp": 11, "figure3": 8, "figure4": 3}
 
 
-#: XLA flag of ``--quick`` runs, set before JAX's backend starts (by the command line, and in every
-#: worker): at small sizes a run is compile-bound, and LLVM's optimisations are ~20 % of XLA's
-#: compile time (cold donders_nio + figure3: 62.7 s → 50.4 s wall, same numbers) for kernels that
-#: then run for milliseconds. An ``XLA_FLAGS`` that sets the level already wins.
-QUICK_XLA_FLAG = "--xla_backend_optimization_level=0"
-
-
-def quick_xla_flags(env=os.environ) -> None:
-    """Add :data:`QUICK_XLA_FLAG` to ``env["XLA_FLAGS"]`` unless it sets the optimisation level;
-    effective only before the process's first JAX computation."""
-    flags = env.get("XLA_FLAGS", "")
-    if "xla_backend_optimization_level" not in flags:
-        env["XLA_FLAGS"] = f"{flags} {QUICK_XLA_FLAG}".strip()
-
-
 def default_jobs() -> int:
     """Worker processes of ``reproduce``: the cores this process may run on."""
     try:
@@ -375,13 +360,10 @@ def _run_part(name: str, part, ctx: PartContext) -> dict:
 _WORKER: dict = {}
 
 
-def _worker_init(queue, cache_dir, log_dir, quick=False) -> None:
-    """Set up a spawned worker like the parent: float64, the compilation cache, Agg, ``--quick``'s
-    XLA flag; its stdout and stderr (JAX, XLA and MuJoCo messages) go to
-    ``log_dir/worker-PID.log``, not the console."""
+def _worker_init(queue, cache_dir, log_dir) -> None:
+    """Set up a spawned worker like the parent: float64, the compilation cache, Agg; its stdout and
+    stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log``, not the console."""
     os.environ.setdefault("MPLBACKEND", "Agg")
-    if quick:
-        quick_xla_flags()
     log = open(Path(log_dir) / f"worker-{os.getpid()}.log", "a", buffering=1)  # noqa: SIM115
     sys.stdout.flush()
     sys.stderr.flush()
@@ -490,7 +472,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
             if not alone:
                 pending = []
             with ProcessPoolExecutor(1 if alone else n_workers, mp_context=ctx, initializer=_worker_init,
-                                     initargs=(queue, cache_dir and str(cache_dir), str(log_dir), quick)) as ex:
+                                     initargs=(queue, cache_dir and str(cache_dir), str(log_dir))) as ex:
                 futs = {}
                 for name in batch:
                     ui.submitted(name)
@@ -709,8 +691,6 @@ def _reproduce_cmd(args) -> int:
         unknown = [n for n in args.only if n not in parts]
         if unknown:
             raise UserError(f"--only: unknown part(s) {', '.join(unknown)}; available: {', '.join(parts)}")
-    if args.quick:
-        quick_xla_flags()
     res = reproduce(args.out, quick=args.quick, force=args.force, only=args.only, seed=args.seed,
                     progress=not args.no_progress, cache=not args.no_cache, jobs=args.jobs)
     failed = [k for k, v in res.items() if not k.startswith("_") and v.get("status") == "failed"]

@@ -5,15 +5,9 @@ import os
 import shutil
 import tempfile
 
-# XLA without LLVM's optimisations (unless XLA_FLAGS sets a level, e.g. 2 to test as users run):
-# the suite is compile-bound, and this cuts its CPU time by ~11 % (test_pointing + test_simulate
-# 423 → 377 s). Set before JAX's backend starts; the processes the tests start inherit it.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_backend_optimization_level=0".strip()
-
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax
+import numpy as np
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")

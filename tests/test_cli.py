@@ -232,18 +232,3 @@ def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, 
     assert _cli.main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and key in err and "Traceback" not in err
-
-
-def test_quick_xla_flag_is_added_once_and_never_overrides_a_users_level():
-    env = {}
-    _cli.quick_xla_flags(env)
-    assert env["XLA_FLAGS"] == "--xla_backend_optimization_level=0"
-    _cli.quick_xla_flags(env)  # idempotent
-    assert env["XLA_FLAGS"].count("optimization_level") == 1
-    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
-    _cli.quick_xla_flags(env)  # kept, and the level appended
-    assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2",
-                                        "--xla_backend_optimization_level=0"]
-    env = {"XLA_FLAGS": "--xla_backend_optimization_level=2"}
-    _cli.quick_xla_flags(env)  # the user's level wins
-    assert env["XLA_FLAGS"] == "--xla_backend_optimization_level=2"
