@@ -260,7 +260,8 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     points); a worker that crashes fails its part, the others still run.
 
     Measured (``--quick``, cold ``--no-cache``, 2-core AMD EPYC Zen 4 KVM, 2026-12-02): idle,
-    ``jobs=2`` 228 s wall / 420 s user CPU, ``jobs=1`` 299 s / 387 s. On cores shared with other
+    ``jobs=2`` 183 s wall / 340 s user CPU (07:12 UTC, 96 XLA compilations; 228 s / 420 s and
+    ``jobs=1`` 299 s / 387 s at 04:20 with 918). On cores shared with other
     jobs (load 5–9) a second worker gains nothing (cold ``jobs=2`` 782 s / 512 s; warm cache
     ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s): one process already uses more than one core.
     """
