@@ -85,7 +85,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import hugmp_directory, pad_rows
+from pmpjax.internal import hugmp_directory, pad_rows, row_chunks
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints
@@ -386,18 +386,10 @@ def _rates(KJ, W, tau0, q0, *, minjerk: bool):
 
 _rates_jit = jax.jit(_rates, static_argnames=("minjerk",))
 
-#: Rows per eager call of the jitted helpers below (padded): every row count shares one compile.
-_ROWS = 64
-
-
 def _host_rows(fn, *rows):
-    """``fn`` (jitted, row-wise) on arrays with a leading row axis R, in padded chunks of
-    ``_ROWS`` rows; results as NumPy with R rows."""
-    R = len(rows[0])
-    Rp = -(-R // _ROWS) * _ROWS
-    rows = [pad_rows(np.asarray(a), Rp) for a in rows]
-    parts = [jax.device_get(fn(*(a[i:i + _ROWS] for a in rows))) for i in range(0, Rp, _ROWS)]
-    return jax.tree_util.tree_map(lambda *p: np.concatenate(p)[:R], *parts)
+    """``fn`` (jitted, row-wise) on arrays with a leading row axis R, in padded chunks of 64 rows
+    (every row count shares one compile); results as NumPy with R rows."""
+    return row_chunks(fn, *rows, small=64, chunk=64)
 
 
 @partial(jax.jit, static_argnums=1)

@@ -11,6 +11,7 @@ from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
 from ._base.batching import on_host as on_host
 from ._base.batching import pad_rows as pad_rows
+from ._base.batching import row_chunks as row_chunks
 from ._base.batching import unflatten_batch as unflatten_batch
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first

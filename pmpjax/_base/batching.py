@@ -98,20 +98,28 @@ def pad_rows(a, size: int, *, axis: int = 0, fill: str = "edge"):
     return xp.concatenate([a, extra], axis=axis)
 
 
+def row_chunks(fn, *rows, small: int = 64, chunk: int = 1024):
+    """``fn(*rows)`` for a row-wise jitted ``fn`` and concrete ``rows`` (R, ...): padded (edge) to
+    ``small`` rows, or cut into padded chunks of ``chunk`` rows, so that every R shares at most two
+    compilations of ``fn``. Returns ``fn``'s outputs as NumPy with R rows."""
+    R = len(rows[0])
+    Rp = small if R <= small else -(-R // chunk) * chunk
+    rows = [pad_rows(np.asarray(a), Rp) for a in rows]
+    size = min(Rp, chunk)
+    parts = [jax.device_get(fn(*(a[i : i + size] for a in rows))) for i in range(0, Rp, size)]
+    return jax.tree_util.tree_map(lambda *p: np.concatenate(p)[:R], *parts)
+
+
 def eager_rows(fn, x, core: int, *, small: int = 64, chunk: int = 1024):
     """``fn(x)`` for a row-wise jitted ``fn`` and ``x`` (..., *core) with ``core`` trailing axes.
 
-    A concrete ``x`` is flattened to rows, padded to ``small`` rows or cut into padded chunks of
-    ``chunk`` rows, so that every batch shape shares two compilations of ``fn``; the outputs'
-    leading row axis is unflattened again (``jax.Array``). A tracer goes to ``fn`` as it is.
+    A concrete ``x`` is flattened to rows and evaluated by :func:`row_chunks` (two compilations
+    of ``fn`` for every batch shape); the outputs' leading row axis is unflattened again
+    (``jax.Array``). A tracer goes to ``fn`` as it is.
     """
     if not is_concrete(x) or np.size(x) == 0:
         return fn(x)
     x = np.asarray(x)
     batch = x.shape[: x.ndim - core]
-    B = math.prod(batch)
-    Bp = small if B <= small else -(-B // chunk) * chunk
-    flat = pad_rows(x.reshape((B,) + x.shape[x.ndim - core :]), Bp)
-    size = min(Bp, chunk)
-    parts = [jax.device_get(fn(flat[i : i + size])) for i in range(0, Bp, size)]
-    return jax.tree_util.tree_map(lambda *p: to_jax(np.concatenate(p)[:B].reshape(batch + p[0].shape[1:])), *parts)
+    out = row_chunks(fn, x.reshape((math.prod(batch),) + x.shape[x.ndim - core :]), small=small, chunk=chunk)
+    return jax.tree_util.tree_map(lambda a: to_jax(a.reshape(batch + a.shape[1:])), out)

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
+from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, row_chunks, unflatten_batch
 from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
@@ -160,11 +160,6 @@ def equilibrium_one(
     return q, lam, status, res, steps
 
 
-#: Row counts of eager (concrete) :func:`equilibrium_posture` calls: small batches are padded to
-#: ``_EAGER_SMALL``, larger ones solved in chunks of ``_EAGER_CHUNK``.
-_EAGER_SMALL, _EAGER_CHUNK = 64, 1024
-
-
 @partial(jax.jit, static_argnames=("tol", "max_iter"))
 def _flat_solve(chain, K, qr, x, q0, *, tol, max_iter):
     return jax.vmap(lambda k, r, t, q: equilibrium_one(chain, k, r, t, q, tol=tol, max_iter=max_iter))(
@@ -226,11 +221,8 @@ def equilibrium_posture(
     if is_concrete(chain, KJ, q_rest, target, q0):
         # Eager: padded to 64 rows or solved in chunks of 1024, so that a chain compiles at most
         # twice whatever the batch sizes (a compile costs seconds, 1024 wrist rows ≈ 5 ms).
-        Bp = _EAGER_SMALL if B <= _EAGER_SMALL else -(-B // _EAGER_CHUNK) * _EAGER_CHUNK
-        flat = [pad_rows(flatten_batch(a, batch, core, dtype=dtype, xp=np), Bp) for a, core in args]
-        size = min(Bp, _EAGER_CHUNK)
-        chunks = [_flat_solve(chain, *(a[i:i + size] for a in flat), **opts) for i in range(0, Bp, size)]
-        out = [np.concatenate([np.asarray(c[k]) for c in chunks]) for k in range(5)]
+        out = row_chunks(lambda *r: _flat_solve(chain, *r, **opts),
+                         *(flatten_batch(a, batch, core, dtype=dtype, xp=np) for a, core in args))
     else:
         # Traced: padded to a power of two (>= 8) so that calls of similar size share one compile.
         Bp = bucket(B, minimum=8)
