@@ -98,6 +98,15 @@ takes the fresh 353 MB output from 90 k page faults to 3 k. What is left (≈ 0.
 1.3× target for every-step saving is not met. The C loop ran at 3.1–3.3 M steps/s in this run
 (4.17 M on 2026-11-22 alone on the machine), so the ratios against it are the ones to read.
 
+Tried and rejected (A/B in separate processes, B = 10 000, idle, 2026-12-02 08:42 UTC, minimum
+of 6 interleaved rounds): writing the samples time-major ((M·S, comp, B) buffers, one transpose at
+the end) instead of trajectory-major blocks: every step 1049 ms → 1048 ms (× final 1.46 → 1.46;
+huge pages 1.34 → 1.33); so the transposed block writes are not the cost. Keeping freed memory
+in glibc's heap (``GLIBC_TUNABLES=glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4000000000``)
+halves the page faults (90 k → 47 k) and gives 1.37×, between the default and huge pages. The
+saved observations are those of the RK4 field's first stage (no extra kinematics per sample); what
+is left is writing and first touching 353 MB of fresh output per call.
+
 Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
 
 | what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |

@@ -349,17 +349,20 @@ def pointing(ctx) -> dict:
 
 def reaching(ctx) -> dict:
     """Held-out prediction of the bundled HuG-MP arm movements (repetitions 8–10) by the λ0-PMP
-    fitted per subject on repetitions 1–7 (final postures through the equilibria, then joint
-    trajectories through ``simulate``), against every baseline; a table and one figure per subject."""
+    Donders-fitted per subject on repetitions 1–7 (stiffness and rest posture from the final
+    postures through the equilibria), against every baseline; a table and one figure per subject."""
     import json
 
     from ._reaching import fit_reaching, plot_reaching_subject, predict_reaching
 
-    # --quick: one subject, task 1, repetitions 1-2, the Donders-fitted model only (final postures,
-    # as in the paper; no trajectory stage): the sizes of tests/test_reaching.py.
+    # The Donders-fitted model (final postures through the equilibria, no trajectory stage), as the
+    # paper fits the wrist: the trajectory stage (``max_steps=(40, 25)``) costs minutes per LM
+    # iteration for the four subjects on two cores (fit_reaching's docstring), too much for the
+    # main job. Full: all four subjects, every task, repetitions 1-7 (~20 s fit + ~30 s prediction);
+    # --quick: one subject, task 1, repetitions 1-2 (the sizes of tests/test_reaching.py).
     subjects = (2,) if ctx.quick else (1, 2, 3, 4)
     opts = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 0), time_constants="fitted", steps_per_sample=10) \
-        if ctx.quick else dict(max_steps=(40, 25))
+        if ctx.quick else dict(max_steps=(40, 0))
     fit = fit_reaching(subjects, **opts)
     pred = predict_reaching(fit, reps=(8, 9, 10))
     pred.to_csv(ctx.out / "reaching_hugmp_motions.csv")
@@ -368,7 +371,10 @@ def reaching(ctx) -> dict:
               "Held-out HuG-MP motions (repetitions 8–10): mean final-posture error and joint-trajectory RMSE "
               "[deg] per subject and predictor — the fitted λ0-PMP ('model'), straight minimum-jerk hand paths "
               "through the plain and the IK-weighted pseudo-inverse, the unfitted λ0-PMP, and the joint-space "
-              "minimum-jerk oracle that knows the recorded final posture.",
+              "minimum-jerk oracle that knows the recorded final posture. The model is Donders-fitted (stiffness and "
+              "rest posture from the final postures of repetitions 1–7 only); 'n' counts the motions it predicts: a "
+              "nearly singular fitted stiffness makes Eq 10's gain too stiff for RK4, and those motions are reported "
+              "as failed (NaN), not dropped silently.",
               "Not in the papers: the λ0-PMP tested on whole-arm reaching (issue 12).")
     (ctx.out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
     for s in dict.fromkeys(pred.subject.tolist()):

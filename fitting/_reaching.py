@@ -797,6 +797,13 @@ def fit_reaching(
       the Arimoto planner, whose Eq 10 gain makes the task dynamics stiff, 2 for the time-base
       generator).
 
+    **Cost** (2 cores, idle, 2026-12-02, four subjects, every task, repetitions 1–7, 747
+    motions): stage 1 ``max_steps=(40, 0)`` 18 s with compilation (``predict_reaching`` then 30 s);
+    each stage-2 LM iteration takes minutes (one did not finish in 6 min idle; three took 30 min
+    under load), because Eq 10's gain at the stage-1 stiffness needs 160 RK4
+    steps per sample (7840 per motion) and the Jacobian carries 13 tangents of each simulation
+    (benchmarks/reaching.py). The main job uses ``(40, 0)``.
+
     All subjects are fitted in one compiled call (see the module docstring). A subject whose file
     is missing or malformed, or that has no usable motion, is reported in ``problems`` with
     ``status`` ``INVALID_INPUT`` / ``TOO_FEW_DATA`` and NaN parameters (and a warning); the others
