@@ -103,9 +103,13 @@ of 6 interleaved rounds): writing the samples time-major ((M·S, comp, B) buffer
 the end) instead of trajectory-major blocks: every step 1049 ms → 1048 ms (× final 1.46 → 1.46;
 huge pages 1.34 → 1.33); so the transposed block writes are not the cost. Keeping freed memory
 in glibc's heap (``GLIBC_TUNABLES=glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4000000000``)
-halves the page faults (90 k → 47 k) and gives 1.37×, between the default and huge pages. The
-saved observations are those of the RK4 field's first stage (no extra kinematics per sample); what
-is left is writing and first touching 353 MB of fresh output per call.
+halves the page faults (90 k → 47 k) and gives 1.37×, between the default and huge pages. Writing
+the end state inside the loop (the compiled HLO then has no whole-buffer copy after the loop):
+1096 → 1075 ms, noise. The saved observations are those of the RK4 field's first stage (no extra
+kinematics per sample). What is left is memory traffic XLA cannot avoid: its output buffers are
+fresh allocations, filled with zeros (the scan carry's initial value) and then written by the loop.
+A jitted fill of five zero buffers of this size alone takes 141 ms (page faults and one write
+pass), a third of the 350 ms gap to the final-only call.
 
 Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
 

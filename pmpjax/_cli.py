@@ -233,10 +233,13 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     return cache
 
 
-#: Wall seconds per part of an idle ``--quick --no-cache`` run, in process (2026-12-02): the order
-#: in which parallel workers take the parts (longest first) when ``results.json`` has no times yet.
-PART_SECONDS = {"pointing": 88, "donders_nio": 50, "reaching": 50, "sweeps": 44, "primitives": 23,
-                "ik_synthetic": 19, "ik_figures": 14, "ik_hugmp": 11, "figure3": 8, "figure4": 3}
+#: Wall seconds per part of idle cold runs, two parts at a time (``--jobs 2``; 2026-12-02, 2-core
+#: AMD EPYC Zen 4 KVM): the order in which parallel workers take the parts (longest first) when
+#: ``results.json`` has no times yet; ``--quick`` (``--no-cache``, 08:56 UTC) and the full run (08:37).
+PART_SECONDS = {"pointing": 59, "reaching": 39, "sweeps": 32, "donders_nio": 28, "primitives": 15,
+                "ik_figures": 12, "ik_synthetic": 12, "ik_hugmp": 9, "figure3": 4, "figure4": 1}
+PART_SECONDS_FULL = {"reaching": 79, "pointing": 69, "ik_hugmp": 62, "sweeps": 50, "donders_nio": 21,
+                     "ik_synthetic": 13, "primitives": 12, "ik_figures": 12, "figure3": 5, "figure4": 1}
 
 
 def default_jobs() -> int:
@@ -254,15 +257,15 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
 
     ``jobs`` > 1 (``None``: :func:`default_jobs`, the command line's default) spawns that many
     worker processes that run the parts, longest first (their previous ``seconds`` in
-    ``results.json``, else :data:`PART_SECONDS`); XLA compiles mostly on one thread, so two parts
-    compiling at once use two cores. ``jobs=1`` (the default here), or a single part to run, runs
-    in this process. Parts given to workers must be importable (module-level functions or entry
+    ``results.json``, else :data:`PART_SECONDS` / :data:`PART_SECONDS_FULL`); XLA compiles mostly
+    on one thread, so two parts compiling at once use two cores. ``jobs=1`` (the default here), or
+    a single part to run, runs in this process. Parts given to workers must be importable (module-level functions or entry
     points); a worker that crashes fails its part, the others still run.
 
-    Measured (``--quick``, cold ``--no-cache``, 2-core AMD EPYC Zen 4 KVM, 2026-12-02): idle,
-    ``jobs=2`` 183 s wall / 340 s user CPU (07:12 UTC, 96 XLA compilations; 228 s / 420 s and
-    ``jobs=1`` 299 s / 387 s at 04:20 with 918). On cores shared with other
-    jobs (load 5–9) a second worker gains nothing (cold ``jobs=2`` 782 s / 512 s; warm cache
+    Measured (2-core AMD EPYC Zen 4 KVM, idle, 2026-12-02, ``jobs=2``): the full run cold
+    (``--no-cache``) 181 s wall / 336 s user CPU; ``--quick`` cold 112 s / 211 s, with a fresh
+    cache 101 s / 190 s, warm (a second run) 33 s / 56 s. On cores shared with other jobs (load
+    5–9) a second worker gains nothing (cold ``--quick`` ``jobs=2`` 782 s / 512 s; warm cache
     ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s): one process already uses more than one core.
     """
     import jax
@@ -320,7 +323,7 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
             def estimate(n):
                 prev = results.get(n) or {}
                 return prev["seconds"] if prev.get("quick") == quick and "seconds" in prev \
-                    else PART_SECONDS.get(n, 10) * (1 if quick else 3)
+                    else (PART_SECONDS if quick else PART_SECONDS_FULL).get(n, 10)
 
             todo.sort(key=estimate, reverse=True)
             _run_in_workers(todo, parts, n_workers, out=out, quick=quick, seed=seed, cache_dir=cache_dir,
@@ -653,7 +656,8 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="run every reproduced result of the three papers (the main job)",
                          description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     rep.add_argument("--out", default="out", help="output folder (created; default: out)")
-    rep.add_argument("--quick", action="store_true", help="small sizes (under a minute)")
+    rep.add_argument("--quick", action="store_true",
+                     help="small sizes (about 35 s with a warm compilation cache, under 2 min cold)")
     rep.add_argument("--force", action="store_true", help="re-run parts that finished before")
     rep.add_argument("--only", nargs="+", metavar="PART", help="run only these parts")
     rep.add_argument("--list", action="store_true", help="list the parts and exit")

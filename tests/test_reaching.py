@@ -20,6 +20,7 @@ import pytest
 import scipy.io
 from _reference import rx, ry, rz
 from scipy.integrate import solve_ivp
+from scipy.optimize import minimize
 
 import fitting
 import pmpjax as pj
@@ -371,6 +372,20 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     assert np.all(np.isfinite(pr.baselines["lambda0_unfitted"].rmse_deg))
     rows = pr.summary()
     assert {r["predictor"] for r in rows} == {"model", *R.BASELINES} and all(r["n"] > 0 for r in rows)
+    # Donders' law of the fitted model: the final posture minimises the elastic energy
+    # ½ (q − q_rest)ᵀ KJ (q − q_rest) on the arm's postures that put the hand on the target (SciPy
+    # SLSQP on the README formula, started at the recorded final posture)
+    KJ, q_rest = clean_fit.KJ[0], clean_fit.q_rest[0]
+    for k in range(N):
+        sol = minimize(lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), pr.q_obs[k, -1], jac=lambda q: KJ @ (q - q_rest),
+                       constraints=[{"type": "eq", "fun": lambda q, k=k: arm_fk(q) - target[k],
+                                     "jac": arm_jac_fd}], method="SLSQP", options={"ftol": 1e-14, "maxiter": 500})
+        assert sol.success, sol.message
+        err = np.sqrt(np.mean(np.rad2deg(sol.x - pr.q_obs[k, -1]) ** 2))
+        np.testing.assert_allclose(pr.final_error_donders_deg[k], err, atol=1e-3)
+    model_row = next(r for r in rows if r["predictor"] == "model" and r["task"] == "all")
+    assert model_row["n_donders"] == N
+    np.testing.assert_allclose(model_row["final_error_donders_deg"], np.mean(pr.final_error_donders_deg))
     pr.to_csv(tmp_path / "p.csv")
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 1 + 5 * N
 
