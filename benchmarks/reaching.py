@@ -94,6 +94,15 @@ S04 rows above): ``fit_reaching([3, 4], max_steps=(15, 0))`` leaves out one moti
 finite loss (0.65 / 1.00; training RMSE 2.4° / 2.9°; still MAX_STEPS at 15 iterations), and
 predicts held-out final postures to a median 1.9° (S03) and 3.6° (S04), joint RMSE 15.1° / 16.8°.
 
+Idle re-run of the Donders-fitted model, 2026-12-02 09:20 UTC (the main job's reaching part):
+``fit_reaching([1, 2, 3, 4], max_steps=(40, 0))`` 18 s with compilation (12 s of it compiling and
+tracing), ``predict_reaching`` 26–34 s; status SUCCESSFUL (S01), MAX_STEPS (S02–S04); training
+RMSE 2.4 / 3.9 / 2.4 / 2.8°. Held-out mean final-posture error [deg], simulated (motions) and the
+model's Donders prediction (its equilibrium at the target, ``final_error_donders_deg``, all
+motions): S01 78.5 (3 of 73; S01's fitted ``KJ`` has eigenvalues down to 5.6e-4, so Eq 10's gain
+needs ~34 000 RK4 steps per sample and 70 motions are reported SINGULAR) / 2.1; S02 3.9 (89) / 4.0;
+S03 2.4 (83) / 1.8; S04 2.9 (84) / 2.3.
+
 Findings (from these runs):
 
 - **Final postures**: the λ0-PMP (fitted or not) predicts held-out final postures to a median 3–5°,
