@@ -364,9 +364,26 @@ def _run_part(name: str, part, ctx: PartContext) -> dict:
 _WORKER: dict = {}
 
 
-def _worker_init(queue, cache_dir, log_dir) -> None:
+def _die_with_parent(parent: int) -> None:
+    """End this spawned process when ``parent`` ends, however it ends (Linux: the kernel sends
+    SIGTERM; elsewhere a no-op), so a killed command leaves no worker computing."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent ended before prctl
+        os._exit(1)
+
+
+def _worker_init(queue, cache_dir, log_dir, parent=None) -> None:
     """Set up a spawned worker like the parent: float64, the compilation cache, Agg; its stdout and
-    stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log``, not the console."""
+    stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log``, not the console; it
+    ends with ``parent``."""
+    if parent is not None:
+        _die_with_parent(parent)
     os.environ.setdefault("MPLBACKEND", "Agg")
     log = open(Path(log_dir) / f"worker-{os.getpid()}.log", "a", buffering=1)  # noqa: SIM115
     sys.stdout.flush()
@@ -446,10 +463,13 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
 
     from rich.markup import escape
 
+    from multiprocessing.managers import SyncManager
+
     ctx = mp.get_context("spawn")
     log_dir = out / "_logs"
     log_dir.mkdir(exist_ok=True)
-    manager = ctx.Manager()
+    manager = SyncManager(ctx=ctx)
+    manager.start(_die_with_parent, (os.getpid(),))
     queue = manager.Queue()
     started: dict[str, int] = {}
     pump = threading.Thread(target=ui.pump, args=(queue, started), daemon=True)
@@ -476,7 +496,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
             if not alone:
                 pending = []
             with ProcessPoolExecutor(1 if alone else n_workers, mp_context=ctx, initializer=_worker_init,
-                                     initargs=(queue, cache_dir and str(cache_dir), str(log_dir))) as ex:
+                                     initargs=(queue, cache_dir and str(cache_dir), str(log_dir), os.getpid())) as ex:
                 futs = {}
                 for name in batch:
                     ui.submitted(name)

@@ -1,5 +1,6 @@
 """The command line's runner: artefacts, report, skipping, failures, interruption, bad input."""
 
+import contextlib
 import json
 import os
 import signal
@@ -7,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -159,6 +161,56 @@ def test_an_interrupted_run_keeps_the_parts_already_written(tmp_path):
     saved = json.loads(results.read_text())
     assert saved["figure4"]["status"] == "ok" and "hang" not in saved
     assert (tmp_path / "figure4_summed_moves.png").read_bytes()[:8] == PNG_MAGIC
+
+
+def _alive(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")  # a zombie has exited
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and prctl: Linux")
+def test_terminating_the_command_stops_its_worker_processes(tmp_path):
+    """SIGTERM to ``reproduce`` (a job scheduler's timeout, ``kill``) must not leave its spawned
+    workers computing: they stop with it."""
+    (tmp_path / "sleepers.py").write_text(textwrap.dedent(f"""
+        import os, time
+        def sleeper(ctx):
+            open(os.path.join({str(tmp_path)!r}, f"worker-{{os.getpid()}}.pid"), "w").close()
+            time.sleep(300)
+    """))
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(tmp_path)!r})
+        import sleepers
+        from pmpjax import _cli
+        _cli.available_parts = lambda: {{"a": sleepers.sleeper, "b": sleepers.sleeper}}
+        _cli.reproduce({str(tmp_path / "out")!r}, quick=True, progress=False, cache=False, jobs=2)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"})
+    pids = []
+    try:
+        deadline = time.time() + 120
+        while len(pids) < 2:
+            assert time.time() < deadline, "the workers never started"
+            assert proc.poll() is None, "the run ended before it could be terminated"
+            time.sleep(0.2)
+            pids = [int(f.stem.split("-")[1]) for f in tmp_path.glob("worker-*.pid")]
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+        deadline = time.time() + 30
+        while any(_alive(p) for p in pids) and time.time() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(p) for p in pids), "worker processes outlived the terminated command"
+    finally:
+        for p in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(p, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
 def test_command_line_bad_input_is_one_line_and_exit_2(capsys):
