@@ -670,8 +670,8 @@ class ReachingPrediction:
     ``final_error_donders_deg`` (N,) the same final-posture error of the fitted model's Donders
     prediction, its equilibrium posture at the target (``pmpjax.equilibrium_posture``, Newton
     started at the recorded final posture as stage 1 of the fit does; NaN where it does not
-    converge), which needs no simulation: it stays defined
-    where Eq 10's gain makes the movement too stiff for RK4 (``status`` ``SINGULAR``); ``duration``,
+    converge), which needs no simulation: it stays defined where Eq 10's gain makes the movement
+    too stiff for RK4 (``status`` ``SINGULAR``); ``duration``,
     ``recording`` (N,) [s]; ``baselines[name]`` a :class:`BaselinePrediction` for each of
     ``BASELINES``; ``model``, ``damping``, ``time_constants`` of the fit; ``skipped`` and
     ``problems`` as in :class:`ReachingFit`.
@@ -817,8 +817,8 @@ def fit_reaching(
     **Cost** (2 cores, idle, 2026-12-02, four subjects, every task, repetitions 1–7, 747
     motions): stage 1 ``max_steps=(40, 0)`` 18 s with compilation (``predict_reaching`` then 30 s);
     each stage-2 LM iteration takes minutes (one did not finish in 6 min idle; three took 30 min
-    under load), because Eq 10's gain at the stage-1 stiffness needs 160 RK4
-    steps per sample (7840 per motion) and the Jacobian carries 13 tangents of each simulation
+    under load), because Eq 10's gain at the stage-1 stiffness needs 160 RK4 steps per sample
+    (7840 per motion) and the Jacobian carries 13 tangents of each simulation
     (benchmarks/reaching.py). The main job uses ``(40, 0)``.
 
     All subjects are fitted in one compiled call (see the module docstring). A subject whose file
