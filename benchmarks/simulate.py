@@ -109,7 +109,9 @@ the end state inside the loop (the compiled HLO then has no whole-buffer copy af
 kinematics per sample). What is left is memory traffic XLA cannot avoid: its output buffers are
 fresh allocations, filled with zeros (the scan carry's initial value) and then written by the loop.
 A jitted fill of five zero buffers of this size alone takes 141 ms (page faults and one write
-pass), a third of the 350 ms gap to the final-only call.
+pass), a third of the 350 ms gap to the final-only call. ``lax.empty`` lowers to zeros on the CPU,
+and XLA's uninitialised ``AllocateBuffer`` custom call has no CPU implementation (tried: "No
+registered implementation ... for Host"), so the zero fill stays.
 
 Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
 
