@@ -152,20 +152,15 @@ class _Motions:
 
 
 @jax.jit
-def _fk_jac_soa(chain, qc):
-    return chain.fk_jac_soa(qc)
+def _fk_jac_rows(chain, q):
+    x, J = chain.fk_jac_soa(q.T)
+    return x.T, jnp.moveaxis(J, -1, 0)
 
 
 def _fk_jac(chain, q):
-    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4) in chunks of 1024 of one
-    compiled call (every K shares one compilation)."""
-    q = np.asarray(q, float).reshape(-1, 4)
-    K = q.shape[0]
-    P = -(-max(K, 1) // 1024) * 1024
-    qp = np.concatenate([q, np.zeros((P - K, 4))])
-    parts = [jax.device_get(_fk_jac_soa(chain, qp[i:i + 1024].T)) for i in range(0, P, 1024)]
-    x, J = (np.concatenate([p[k] for p in parts], axis=-1) for k in (0, 1))
-    return x.T[:K], np.moveaxis(J, -1, 0)[:K]
+    """Hand positions (K, 3) and Jacobians (K, 3, 4) of postures (K, 4), K >= 1, in chunks of 1024
+    of one compiled call (every K shares one compilation)."""
+    return row_chunks(lambda r: _fk_jac_rows(chain, r), np.asarray(q, float).reshape(-1, 4), small=1024, chunk=1024)
 
 
 def _fk(chain, q):

@@ -259,8 +259,9 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     worker processes that run the parts, longest first (their previous ``seconds`` in
     ``results.json``, else :data:`PART_SECONDS` / :data:`PART_SECONDS_FULL`); XLA compiles mostly
     on one thread, so two parts compiling at once use two cores. ``jobs=1`` (the default here), or
-    a single part to run, runs in this process. Parts given to workers must be importable (module-level functions or entry
-    points); a worker that crashes fails its part, the others still run.
+    a single part to run, runs in this process. Parts given to workers must be importable
+    (module-level functions or entry points); a worker that crashes fails its part, the others
+    still run.
 
     Measured (2-core AMD EPYC Zen 4 KVM, idle, 2026-12-02, ``jobs=2``): the full run cold
     (``--no-cache``) 181 s wall / 336 s user CPU; ``--quick`` cold 112 s / 211 s, with a fresh
@@ -460,10 +461,9 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
     import threading
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
+    from multiprocessing.managers import SyncManager
 
     from rich.markup import escape
-
-    from multiprocessing.managers import SyncManager
 
     ctx = mp.get_context("spawn")
     log_dir = out / "_logs"

@@ -377,7 +377,8 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     # SLSQP on the README formula, started at the recorded final posture)
     KJ, q_rest = clean_fit.KJ[0], clean_fit.q_rest[0]
     for k in range(N):
-        sol = minimize(lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), pr.q_obs[k, -1], jac=lambda q: KJ @ (q - q_rest),
+        sol = minimize(lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), pr.q_obs[k, -1],
+                       jac=lambda q: KJ @ (q - q_rest),
                        constraints=[{"type": "eq", "fun": lambda q, k=k: arm_fk(q) - target[k],
                                      "jac": arm_jac_fd}], method="SLSQP", options={"ftol": 1e-14, "maxiter": 500})
         assert sol.success, sol.message

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import on_host
+from .._base.batching import on_host, row_chunks
 from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
 from .._base.validate import is_concrete, to_jax
@@ -246,12 +246,8 @@ def _map_rows(kernel, mx, q):
     (inside ``jit``/``grad``/``vmap``) run it once on the whole batch (inlined)."""
     if not is_concrete(q):
         return kernel(mx, q)
-    q = np.asarray(q)  # (padding, chunks and results on the host: no eager XLA ops)
-    B = q.shape[0]
-    Bp = -(-B // _EAGER_CHUNK) * _EAGER_CHUNK
-    qp = np.concatenate([q, np.broadcast_to(q[:1], (Bp - B,) + q.shape[1:])]) if Bp > B else q
-    parts = [kernel(mx, qp[i : i + _EAGER_CHUNK]) for i in range(0, Bp, _EAGER_CHUNK)]
-    return jax.tree_util.tree_map(lambda *p: to_jax(np.concatenate([np.asarray(a) for a in p])[:B]), *parts)
+    out = row_chunks(lambda r: kernel(mx, r), q, small=_EAGER_CHUNK, chunk=_EAGER_CHUNK)
+    return jax.tree_util.tree_map(to_jax, out)
 
 
 @functools.partial(jax.jit, static_argnames=("site_id",))

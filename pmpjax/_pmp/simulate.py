@@ -360,7 +360,7 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
-    return _simulate(model, planner, q0, on_host(to_jax(target), lambda a: a[..., None, :]), duration, dt, saveat,
+    return _simulate(model, planner, q0, on_host(target, lambda a: a[..., None, :]), duration, dt, saveat,
                      singular_tol, True)
 
 
