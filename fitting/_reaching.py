@@ -1106,8 +1106,8 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     main = pack(qm, xm, sm)
     # Donders' law of the fitted model: its equilibrium posture at each target, Newton started at
     # the recorded final posture as in stage 1 (from the start posture it fails for ~1 in 5 motions)
-    eq = pj.equilibrium_posture(chain, fit.KJ[own], fit.q_rest[own], target, q_init=pad_rows(q_obs[:, -1], Bp))
-    q_eq = np.where(np.asarray(eq.converged)[:, None], np.asarray(eq.q), np.nan)[:N]
+    eq = pj.equilibrium_posture(chain, fit.KJ[owner], fit.q_rest[owner], x_obs[:, -1], q_init=q_obs[:, -1])
+    q_eq = np.where(np.asarray(eq.converged)[:, None], np.asarray(eq.q), np.nan)
     donders = np.sqrt(np.mean(np.rad2deg(q_eq - q_obs[:, -1]) ** 2, axis=-1))
     return ReachingPrediction(
         subject=subject, task=task, rep=rep, index=index, q_obs=q_obs, q_pred=main.q_pred, x_obs=x_obs,
