@@ -53,6 +53,7 @@ from pmpjax.internal import (
     check_positive_int,
     check_spd,
     equilibrium_one,
+    fast_compile_jit,
     on_host,
     pad_rows,
     replace,
@@ -252,7 +253,7 @@ def _residual_fn(chain, n_k, trace, kind, tol):
     return residual
 
 
-@partial(jax.jit, static_argnames=("n_k", "trace", "kind", "tol", "max_steps"))
+@partial(fast_compile_jit, static_argnames=("n_k", "trace", "kind", "tol", "max_steps"))
 def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, rcond):
     residual = _residual_fn(chain, n_k, trace, kind, tol)
     n = chain.n

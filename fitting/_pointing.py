@@ -71,6 +71,7 @@ from pmpjax.internal import (
     check_positive_int,
     check_spd,
     drop_trials,
+    fast_compile_jit,
     model_grid,
     normalised_movements,
     trial_problems,
@@ -540,7 +541,7 @@ def _kernel_halfwidth(bandwidth, h):
     return int(np.ceil(6.0 * float(np.max(bandwidth)) / h))
 
 
-_profiles_jit = jax.jit(_profiles, static_argnames=("h", "J", "threshold", "n_samples", "radius"))
+_profiles_jit = fast_compile_jit(_profiles, static_argnames=("h", "J", "threshold", "n_samples", "radius"))
 
 
 def _check_params(analysis, KJ, q_rest):

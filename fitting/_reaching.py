@@ -85,7 +85,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import hugmp_directory, pad_rows, row_chunks
+from pmpjax.internal import fast_compile_jit, hugmp_directory, pad_rows, row_chunks
 
 from ._donders import _sym_index, stiffness_from_params
 from ._ik.analysis import overspecified_joints
@@ -379,7 +379,7 @@ def _rates(KJ, W, tau0, q0, *, minjerk: bool):
     return jnp.maximum(task, jnp.linalg.eigvalsh(0.5 * (S + jnp.swapaxes(S, -1, -2)))[..., -1])
 
 
-_rates_jit = jax.jit(_rates, static_argnames=("minjerk",))
+_rates_jit = fast_compile_jit(_rates, static_argnames=("minjerk",))
 
 def _host_rows(fn, *rows):
     """``fn`` (jitted, row-wise) on arrays with a leading row axis R, in padded chunks of 64 rows
@@ -449,7 +449,7 @@ def _trajectory_residual(theta, data, cfg: _Config, steps: int):
     return jnp.where(good[:, None], r, jnp.nan).reshape(-1)
 
 
-@partial(jax.jit, static_argnames=("cfg",))
+@partial(fast_compile_jit, static_argnames=("cfg",))
 def _stage1_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Config):
     """Stage 1 for all subjects (leading axis): ``KJ``, ``q_rest`` (``theta0`` (S, 12)) from the
     final postures; the iteration limit is traced (one compilation for every limit)."""
@@ -464,7 +464,7 @@ def _stage1_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Con
     return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
 
 
-@partial(jax.jit, static_argnames=("cfg",))
+@partial(fast_compile_jit, static_argnames=("cfg",))
 def _start_usable(theta0, q_obs, t_ratio, weight, elbow, *, cfg: _Config):
     """(S, B) bool: motions whose final-posture equilibrium exists at the stage-1 start."""
 
@@ -474,7 +474,7 @@ def _start_usable(theta0, q_obs, t_ratio, weight, elbow, *, cfg: _Config):
     return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
 
 
-@partial(jax.jit, static_argnames=("cfg", "steps"))
+@partial(fast_compile_jit, static_argnames=("cfg", "steps"))
 def _stage2_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Config, steps: int):
     """Stage 2 for all subjects: every parameter from the trajectories; covariance at the end."""
 

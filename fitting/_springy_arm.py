@@ -25,6 +25,7 @@ from pmpjax.internal import (
     check_positive_int,
     check_set_point,
     check_stiffness,
+    fast_compile_jit,
     pad_rows,
     pytree_dataclass,
     to_jax,
@@ -103,7 +104,7 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
     )
 
 
-@functools.partial(jax.jit, static_argnames=("site_id", "max_steps"))
+@functools.partial(fast_compile_jit, static_argnames=("site_id", "max_steps"))
 def _fit_blend(mx, site_id, P, K, targets, max_steps):
     def hand_of(z):
         return arm_equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, n_iter=N_NEWTON)[1]
@@ -164,7 +165,7 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
     )
 
 
-@functools.partial(jax.jit, static_argnames=("max_steps",))
+@functools.partial(fast_compile_jit, static_argnames=("max_steps",))
 def _fit_stiffness(mx, q_set, q_obs, kappa0, max_steps):
     def resid(kappa, q_o):
         K = jnp.exp(kappa)

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from pmpjax import Status, Wrist
-from pmpjax.internal import MODEL_DT, MODEL_SPAN, check_positive_int, normalised_movements
+from pmpjax.internal import MODEL_DT, MODEL_SPAN, check_positive_int, fast_compile_jit, normalised_movements
 
 from ._optimise import covariance, least_squares
 from ._pointing import (
@@ -102,7 +102,7 @@ def path_residual(r0, r, KJ, q_rest, data, *, threshold, n_samples, radius, d, J
     return jnp.concatenate([r_path.reshape(-1), r_speed.reshape(-1), r_dur])
 
 
-@partial(jax.jit, static_argnames=("opts", "max_steps"))
+@partial(fast_compile_jit, static_argnames=("opts", "max_steps"))
 def _fit_items(theta0, KJ, q_rest, data, *, opts, max_steps):
     opts = dict(opts)
 
@@ -240,7 +240,7 @@ def _joint_residual(opts, n_torsion):
     return residual
 
 
-@partial(jax.jit, static_argnames=("opts", "max_steps", "n_torsion"))
+@partial(fast_compile_jit, static_argnames=("opts", "max_steps", "n_torsion"))
 def _fit_joint(theta0, data, *, opts, max_steps, n_torsion):
     residual = _joint_residual(dict(opts), n_torsion)
 

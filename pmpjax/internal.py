@@ -6,6 +6,7 @@ part of the stable API — names here may change between releases without deprec
 (tests/test_public_api.py) keeps it so.
 """
 
+# jax.jit for compile-bound kernels (fits, equilibria, MJX rollouts; pmpjax/_base/compile.py)
 # Leading batch axes and padding (pmpjax/_base/batching.py)
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
@@ -13,6 +14,8 @@ from ._base.batching import on_host as on_host
 from ._base.batching import pad_rows as pad_rows
 from ._base.batching import row_chunks as row_chunks
 from ._base.batching import unflatten_batch as unflatten_batch
+from ._base.compile import FAST_COMPILE as FAST_COMPILE
+from ._base.compile import fast_compile_jit as fast_compile_jit
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first
 from ._base.linalg import det as det

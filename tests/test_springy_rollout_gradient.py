@@ -32,7 +32,8 @@ def test_rollout_gradient_matches_c_mujoco_central_differences(free_arm, P):
         return np.sum((qs - q_ref) ** 2) * free_arm.dt + np.sum((qT - q_ref) ** 2)
 
     x0 = (alpha0, free_arm.K, free_arm.B, q00)
-    val, grads = jax.value_and_grad(loss, argnums=(0, 1, 2, 3))(*x0)
+    # Compiled as users are advised to compile gradients through rollouts (about a quarter faster).
+    val, grads = pj.fast_compile_jit(jax.value_and_grad(loss, argnums=(0, 1, 2, 3)))(*x0)
     assert float(val) == pytest.approx(loss_c(*x0), rel=1e-12)
     for i, g in enumerate(grads):
         f = lambda x, i=i: loss_c(*(x if j == i else a for j, a in enumerate(x0)))  # noqa: E731

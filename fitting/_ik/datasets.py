@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import check_positive_int, integrate, minimum_jerk, mv, pinv_apply_diag_soa
+from pmpjax.internal import check_positive_int, fast_compile_jit, integrate, minimum_jerk, mv, pinv_apply_diag_soa
 
 # Contribution coefficients reported in the paper's Discussion (Eq 26) for Experiment 1:
 # Natural β = (.04, .27, .65, .04), Viscous β = (.09, .68, .14, .09) -> weights ∝ 1/β (rounded;
@@ -54,7 +54,7 @@ def _ik_velocity(J, w, b, g):
     return g + pinv_apply_diag_soa(J, 1.0 / w, b - mv(J, g))[0]
 
 
-@jax.jit
+@fast_compile_jit
 def _reach(chain, q0, x_goal, w, k_pos, k_null, dt):
     """Batch of reaches: ``q0`` (4, B), ``x_goal`` (3, B), ``w`` (4, B). Returns q, qdot (S, 4, B)."""
     x0, _ = chain.fk_jac_soa(q0)
@@ -153,7 +153,7 @@ def _square_solve(Jm, b):
     return pinv_apply_diag_soa(Jm, jnp.ones_like(Jm[0]), b)[0]
 
 
-@partial(jax.jit, static_argnames=("hold",))
+@partial(fast_compile_jit, static_argnames=("hold",))
 def _prosthetic_run(chain, q0, targets, cond, w_user, q_hat, k_task, alpha, dt, hold):
     n_steps = 1  # one RK4 step per save
     w_eq25 = jnp.asarray(EQ25_W)[:, None]

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import check_positive_int
+from pmpjax.internal import check_positive_int, fast_compile_jit
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 
@@ -60,7 +60,7 @@ def _check_key(key, name="key"):
     raise TypeError(f"`{name}` must be one JAX PRNG key (jax.random.PRNGKey(seed)), got {key!r}")
 
 
-@partial(jax.jit, static_argnames=("n_reps", "K", "m"))
+@partial(fast_compile_jit, static_argnames=("n_reps", "K", "m"))
 def _fig1_data(key, w_true, sigma, *, n_reps, K, m):
     n = w_true.shape[0]
     # one draw, split into J, ẋ and ṽ (three separate draws take seconds to compile)

@@ -29,6 +29,7 @@ from pmpjax.internal import (
     check_positive,
     check_positive_int,
     det,
+    fast_compile_jit,
     flatten_batch,
     is_concrete,
     mv,
@@ -607,7 +608,7 @@ def _lm_one(q, x, Jb, v, g, *, free, max_steps):
     return jnp.exp(logw), cost, aux[0].astype(jnp.int32), status
 
 
-@partial(jax.jit, static_argnames=("free", "max_steps"))
+@partial(fast_compile_jit, static_argnames=("free", "max_steps"))
 def _lm_batch(qd, xd, Jc, valid, gamma, *, free, max_steps):
     # batch to the front for vmap: (n, B, K) -> (B, n, K)
     f = lambda a: jnp.moveaxis(a, 1, 0)  # noqa: E731

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import on_host, row_chunks
+from .._base.compile import fast_compile_jit
 from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
 from .._base.validate import is_concrete, to_jax
@@ -250,12 +251,12 @@ def _map_rows(kernel, mx, q):
     return jax.tree_util.tree_map(to_jax, out)
 
 
-@functools.partial(jax.jit, static_argnames=("site_id",))
+@functools.partial(fast_compile_jit, static_argnames=("site_id",))
 def _site_jacobians_kernel(mx, q, *, site_id: int):
     return jax.vmap(lambda qq: site_jacobian(mx, site_id, qq))(q)
 
 
-@jax.jit
+@fast_compile_jit
 def _gravity_kernel(mx, q):
     return jax.vmap(lambda qq: gravity_gradient(mx, qq))(q)
 

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, row_chunks, unflatten_batch
+from .._base.compile import fast_compile_jit
 from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
@@ -160,7 +161,7 @@ def equilibrium_one(
     return q, lam, status, res, steps
 
 
-@partial(jax.jit, static_argnames=("tol", "max_iter"))
+@partial(fast_compile_jit, static_argnames=("tol", "max_iter"))
 def _flat_solve(chain, K, qr, x, q0, *, tol, max_iter):
     return jax.vmap(lambda k, r, t, q: equilibrium_one(chain, k, r, t, q, tol=tol, max_iter=max_iter))(
         K, qr, x, q0

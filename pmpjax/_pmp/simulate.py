@@ -15,6 +15,7 @@ import numpy as np
 from jax import lax
 
 from .._base.batching import flatten_batch, on_host
+from .._base.compile import fast_compile_jit
 from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
@@ -113,7 +114,7 @@ def _schedule(saveat: SaveAt, duration: float, dt: float) -> _Schedule:
     return _Schedule(n_steps, tuple(starts), tuple((ends - starts) / n_steps), bool(include0), tuple(ts))
 
 
-@partial(jax.jit, static_argnames=("batch",))
+@partial(fast_compile_jit, static_argnames=("batch",))
 def _rates(model, q0, *, batch):
     """Eigenvalues of ``M = B(q0)⁻¹`` (*batch, m) and the largest |eig| of ``A KJ`` (elastic)."""
     n = model.chain.n

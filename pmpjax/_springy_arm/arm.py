@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import flatten_batch, on_host
+from .._base.compile import fast_compile_jit
 from .._base.mujoco import import_mjx, import_mujoco, load_spec
 from .._base.pytree import pytree_dataclass
 from .._base.validate import as_array, check_positive_int, is_concrete, to_jax
@@ -276,7 +277,7 @@ def _scan_arm(mx, layout: _Layout, controller, K, B, q0, qdot0, q_set0, c0, inpu
     return rec, dT.qpos, dT.qvel
 
 
-@functools.partial(jax.jit, static_argnames=("layout",))
+@functools.partial(fast_compile_jit, static_argnames=("layout",))
 def _rollout_batch(mx, layout, controller, K, B, q0, qdot0, q_set0, c0, inputs):
     """Flat batch: every array argument has a leading (Bt,) axis; the controller's leaves too."""
     fn = functools.partial(_scan_arm, mx, layout, controller)

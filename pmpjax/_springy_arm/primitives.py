@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
+from .._base.compile import fast_compile_jit
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
@@ -193,7 +194,7 @@ def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e
     return arm_equilibrium(arm, q_set, K, n_iter=n_iter, tol=tol)
 
 
-@functools.partial(jax.jit, static_argnames=("site_id", "n_iter", "tol"))
+@functools.partial(fast_compile_jit, static_argnames=("site_id", "n_iter", "tol"))
 def _equilibrium_batch(mx, site_id, q_set, K, n_iter, tol):
     q, hand, res, ok = jax.vmap(lambda a, b: _equilibrium_one(mx, site_id, a, b, n_iter, tol))(q_set, K)
     small = res <= tol * (1.0 + jnp.max(jax.lax.stop_gradient(K), axis=-1))

@@ -1,0 +1,67 @@
+"""``fast_compile_jit`` for the compile-bound kernels: XLA:CPU's legacy loop emitters instead of its MLIR fusion
+emitters (``xla_cpu_use_fusion_emitters=False``).
+
+The fits (Levenberg–Marquardt loops around Newton solves or RK4 simulations), the equilibria and
+the MJX rollouts are compiled once per shape and then run for milliseconds to seconds, so their
+first call is mostly XLA compilation. With the legacy emitters XLA:CPU compiles them 15–55 % faster
+and most of them also run faster (``benchmarks/compile_times.py``, 2026-12-02, idle 2-core Zen 4,
+JAX 0.10.2, compile / run [s], default → this option): ``fit_donders`` 17.4 / 1.99 → 12.7 / 2.02,
+``fit_time_constants`` 14.5 / 1.31 → 13.7 / 0.62, ``rollout_mjx`` 14.1 / 0.117 → 10.7 / 0.029,
+``equilibrium_posture`` 3.1 / 0.004 → 2.4 / 0.002, ``estimate_ik_weights_lm`` 5.1 / 2.80 → 3.9 / 1.15;
+the NIO fit's XLA compilation alone 10.5 → 4.8 s. Results agree to rounding (a different
+fusion, not different arithmetic).
+
+Not used where run time at large batches is the point: ``simulate``'s RK4 kernel (compile 3.3 →
+3.2 s at Figure 3's size, noise; B = 10 000 wrist movements run 1.02 → 1.35 s) and the IK weights'
+Algorithm 1 (0.54 → 0.75 s at Fig 1's size). Its RK4 stability check (``_rates``) uses it (0.8 →
+0.4 s).
+Inside a caller's ``jit`` (or ``vmap``/``grad`` trace) the caller's options apply: JAX takes options
+only at the top level.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+
+try:  # JAX 0.10: True outside every jit/vmap/grad trace
+    from jax._src.core import trace_state_clean as _top_level
+except ImportError:  # pragma: no cover - a JAX without it: always the nested (option-free) path
+    def _top_level():
+        return False
+
+#: XLA:CPU options of the compile-bound kernels (module docstring).
+FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
+
+
+class _FastCompileJit:
+    """Two ``jax.jit`` of one function: with the options for top-level calls (and ``lower``,
+    ``trace``, ...), without them inside a caller's trace (JAX refuses ``compiler_options`` on
+    nested ``jit``; the caller's top-level ``jit`` decides the options there)."""
+
+    def __init__(self, fun, options, kwargs):
+        self._top = jax.jit(fun, compiler_options=options, **kwargs)
+        self._nested = jax.jit(fun, **kwargs)
+        functools.update_wrapper(self, fun)
+
+    def __call__(self, *args, **kwargs):
+        return (self._top if _top_level() else self._nested)(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._top, name)
+
+
+def fast_compile_jit(fun=None, **kwargs):
+    """``jax.jit`` with :data:`FAST_COMPILE` (merged under explicit ``compiler_options``) for
+    top-level calls; also usable as ``@fast_compile_jit`` or
+    ``@partial(fast_compile_jit, static_argnames=...)``."""
+    if fun is None:
+        return functools.partial(fast_compile_jit, **kwargs)
+    if not callable(fun):
+        raise TypeError(f"`fun` must be callable, got {type(fun).__name__}")
+    extra = kwargs.pop("compiler_options", None) or {}
+    if not isinstance(extra, dict):
+        raise TypeError(f"`compiler_options` must be a dict of XLA options, got {type(extra).__name__}")
+    options = {**FAST_COMPILE, **extra}
+    return _FastCompileJit(fun, options, kwargs)
