@@ -66,6 +66,27 @@ has ``donders_nio``'s compiled shapes: ``reproduce --quick --only donders_nio po
 with a fresh cache, wall 225.5 → 186.4 s (pointing 207 → 171 s; load 5–6); alone
 (``--only pointing``, jobs 1, no cache) 112 → 116 s at load 4–5 (it then compiles the larger
 fit and a 1024-row equilibrium batch itself).
+
+Session 9 (2026-12-02 11:55–13:25 UTC, idle, the machine ≈ 25 % slower after 12:15 than before,
+so compare within a pair only). XLA:CPU's MLIR fusion emitters (its default) against its legacy
+loop emitters (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=false``), whole table run back to back,
+compile / run [s]: equilibrium_posture 3.14 / 0.004 → 2.42 / 0.002, figure3_data 6.34 / 0.027 →
+5.43 / 0.018, fit_donders 17.38 / 1.99 → 12.74 / 2.02, estimate_ik_weights 3.14 / 0.54 → 2.28 /
+0.75, estimate_ik_weights_lm 5.11 / 2.80 → 3.93 / 1.15, pointing_pipeline 3.63 / 0.76 → 2.83 /
+0.74, fit_time_constants 14.54 / 1.31 → 13.72 / 0.62, arm_equilibrium 5.81 / 0.008 → 4.98 /
+0.009, rollout_mjx 14.07 / 0.117 → 10.70 / 0.029. The NIO fit's XLA compilation alone (6 subjects
+× 100 postures, 2 starts): 10.5 → 4.8 s, run 0.69 → 0.48 s. ``simulate``'s RK4 kernel gains
+nothing (Figure-3 size, three runs each: 3.2 vs 3.3 s) and runs 30 % slower at B = 10 000; the
+IK weights' Algorithm 1 runs 38 % slower. Hence ``pmpjax.fast_compile_jit`` (pmpjax/_base/compile.py):
+the option for the top-level calls of the fits, equilibria, MJX rollouts, sweeps and the RK4
+stability check, not for ``simulate``'s kernel or Algorithm 1. ``jax.grad`` through a rollout
+(tests/test_springy_rollout_gradient.py) wrapped in it: first call 64.9 → 49.9 s. Main job
+``reproduce --quick --no-cache``, A/B against the previous commit in alternating runs: 183 → 144 s
+and 181 → 163 s wall (339 → 267 and 337 → 301 s CPU). Also tried (NIO fit, compile / run):
+``--xla_backend_optimization_level=1`` 9.4 / 0.81 (no gain), ``=0`` 5.2 / 3.69 (5× slower runs),
+``--xla_llvm_disable_expensive_passes`` 9.4 / 0.55, ``--xla_cpu_max_isa=AVX2`` 8.8 / 0.62,
+``--xla_cpu_use_thunk_runtime=false`` 10.0 / 0.70, ``--xla_cpu_parallel_codegen_split_count=1``
+(simulate) no gain.
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
