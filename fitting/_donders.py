@@ -361,9 +361,9 @@ def fit_donders(
     **Raises:** ``TypeError``/``ValueError`` naming the argument for a non-chain, wrong shapes,
     NaN/inf among the valid samples, unreachable pointing, bad options.
 
-    **Compile time:** ≈ 27 s on first use (the NIO residual, its forward-mode Jacobian through the
+    **Compile time:** ≈ 13 s on first use (the NIO residual, its forward-mode Jacobian through the
     equilibria and the LM loop, compiled once for every subject in the batch; subject counts are
-    bucketed); ≈ 4 s to run the six Table subjects × 500 postures (benchmarks/compile_times.py).
+    bucketed); ≈ 2 s to run the six Table subjects × 500 postures (benchmarks/compile_times.py).
     """
     if not isinstance(chain, Chain):
         raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")

@@ -677,7 +677,7 @@ def predict_pointing(analysis: PointingAnalysis, KJ, q_rest, *, tau0=None, tau=N
     trials. Its ``A_net`` is compared with the measured ones by a one-sample t-test per subject ×
     movement (α = 0.05). Returns a :class:`PointingPrediction`.
 
-    **Compile time:** ≈ 10 s on first use, together with :func:`analyze_pointing`
+    **Compile time:** ≈ 3 s on first use, together with :func:`analyze_pointing`
     (benchmarks/compile_times.py).
     """
     KJ, q_rest = _check_params(analysis, KJ, q_rest)

@@ -150,8 +150,8 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     Starts at the paper's ``τ = τ0 = T/5`` (T: the subject's mean duration, or the movement's).
     Returns a :class:`TimeConstantFit`; items without data get status TOO_FEW_DATA and NaN.
 
-    **Compile time:** ≈ 20 s on first use on an idle 2-core CPU (LM through ``simulate`` of every
-    movement with forward-mode derivatives: ≈ 9 s tracing, the rest XLA); ≈ 1 s to run 2 subjects
+    **Compile time:** ≈ 14 s on first use on an idle 2-core CPU (LM through ``simulate`` of every
+    movement with forward-mode derivatives: ≈ 9 s tracing, the rest XLA); ≈ 0.6 s to run 2 subjects
     × 3 trials (benchmarks/compile_times.py).
     """
     KJ, q_rest = _check_params(analysis, KJ, q_rest)

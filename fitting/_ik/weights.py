@@ -645,7 +645,7 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     function theorem (exact Hessian of the cost at the optimum), not through the iterations. Items
     whose fit did not converge have zero derivative.
 
-    **Compile time:** ≈ 12 s on first use (LM with a forward-mode Jacobian;
+    **Compile time:** ≈ 4 s on first use (LM with a forward-mode Jacobian;
     benchmarks/compile_times.py).
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)

@@ -197,7 +197,7 @@ def equilibrium_posture(
     **Raises:** ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
     NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_iter``.
 
-    **Compile time:** ≈ 3.7 s per chain for the first call of up to 64 postures and again for the
+    **Compile time:** ≈ 2.4 s per chain for the first call of up to 64 postures and again for the
     first larger one (then chunks of 1024; under ``jit`` per power-of-two batch size), see
     benchmarks/compile_times.py.
     """

@@ -161,7 +161,7 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     converged when ``residual <= tol·(1 + max K)`` and the equilibrium is stable.
     (Not :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium of a chain.)
 
-    **Compile time:** ≈ 10 s on first use per bucketed batch size (MJX kinematics inside Newton's
+    **Compile time:** ≈ 5 s on first use per bucketed batch size (MJX kinematics inside Newton's
     loop; benchmarks/compile_times.py).
     """
     check_arm(arm)
