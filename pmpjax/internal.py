@@ -15,6 +15,7 @@ from ._base.batching import pad_rows as pad_rows
 from ._base.batching import row_chunks as row_chunks
 from ._base.batching import unflatten_batch as unflatten_batch
 from ._base.compile import FAST_COMPILE as FAST_COMPILE
+from ._base.compile import TopLevelOptionsJit as TopLevelOptionsJit
 from ._base.compile import fast_compile_jit as fast_compile_jit
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first

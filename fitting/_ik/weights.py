@@ -25,6 +25,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from pmpjax import Status
 from pmpjax.internal import (
+    TopLevelOptionsJit,
     as_array,
     check_positive,
     check_positive_int,
@@ -323,10 +324,9 @@ def _algorithm1_all(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_t
 
 
 _STATIC = ("max_iter", "fixed", "chunk", "mesh")
-_algorithm1 = jax.jit(_algorithm1_all, static_argnames=_STATIC, compiler_options=_FAST_SUMS)
-# inside a caller's jit (compiler options apply to top-level computations only): strict sums,
-# ≈ 4× slower
-_algorithm1_traced = jax.jit(_algorithm1_all, static_argnames=_STATIC)
+# (inside a caller's jit the options do not apply, JAX takes them at the top level only: strict
+# sums, ≈ 4× slower)
+_algorithm1 = TopLevelOptionsJit(_algorithm1_all, _FAST_SUMS, static_argnames=_STATIC)
 
 
 def _items_first(out, B0):
@@ -502,7 +502,7 @@ def estimate_ik_weights(
     # small problems in one piece (compiles faster), large ones in cache-sized chunks of items
     Bl = arrays[0].shape[0] // (1 if mesh is None else mesh.size)
     nc = -(-Bl * K // _CHUNK_SAMPLES) if Bl * K > _DIRECT_SAMPLES else 1
-    out = (_algorithm1 if concrete else _algorithm1_traced)(
+    out = _algorithm1(
         *arrays,
         jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
         jnp.asarray(float(w_min)), jnp.asarray(np.inf if w_max is None else float(w_max)),

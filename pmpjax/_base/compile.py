@@ -35,13 +35,13 @@ except ImportError:  # pragma: no cover - a JAX without it: always the nested (o
 FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 
 
-class _FastCompileJit:
-    """Two ``jax.jit`` of one function: with the options for top-level calls (and ``lower``,
+class TopLevelOptionsJit:
+    """Two ``jax.jit`` of one function: with XLA ``options`` for top-level calls (and ``lower``,
     ``trace``, ...), without them inside a caller's trace (JAX refuses ``compiler_options`` on
     nested ``jit``; the caller's top-level ``jit`` decides the options there)."""
 
-    def __init__(self, fun, options, kwargs):
-        self._top = jax.jit(fun, compiler_options=options, **kwargs)
+    def __init__(self, fun, options, **kwargs):
+        self._top = jax.jit(fun, compiler_options=dict(options), **kwargs)
         self._nested = jax.jit(fun, **kwargs)
         functools.update_wrapper(self, fun)
 
@@ -64,4 +64,4 @@ def fast_compile_jit(fun=None, **kwargs):
     if not isinstance(extra, dict):
         raise TypeError(f"`compiler_options` must be a dict of XLA options, got {type(extra).__name__}")
     options = {**FAST_COMPILE, **extra}
-    return _FastCompileJit(fun, options, kwargs)
+    return TopLevelOptionsJit(fun, options, **kwargs)
