@@ -213,8 +213,8 @@ class _Captured(Exception):
 
 
 def capture_run(q0, xd, save):
-    """The jitted ``_simulate._run`` and the arguments and static options ``simulate`` gives the
-    kernel that wraps it (captured by a stand-in ``_kernel``, not executed)."""
+    """The jitted kernel ``simulate`` runs at this batch size (``_simulate._primal_run``) and its
+    arguments and static options (captured by a stand-in ``_kernel``, not executed)."""
     model, planner = bl.jax_problem()
     box = {}
     orig = _simulate._kernel
@@ -233,7 +233,8 @@ def capture_run(q0, xd, save):
         pass
     finally:
         _simulate._kernel = orig
-    return _simulate._run, box["args"], box["kwargs"]
+    run = _simulate._primal_run(box["kwargs"])  # the kernel simulate runs at this batch size
+    return run.func, box["args"], run.keywords
 
 
 def public_call(q0, xd, save):

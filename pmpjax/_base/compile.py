@@ -26,10 +26,16 @@ import functools
 import jax
 
 try:  # JAX 0.10: True outside every jit/vmap/grad trace
-    from jax._src.core import trace_state_clean as _top_level
+    from jax._src.core import trace_state_clean as _trace_state_clean
 except ImportError:  # pragma: no cover - a JAX without it: always the nested (option-free) path
-    def _top_level():
+    def _trace_state_clean():
         return False
+
+
+def top_level() -> bool:
+    """True outside every ``jit``/``vmap``/``grad`` trace (and outside the eager evaluation of a
+    ``custom_jvp``/``custom_vmap`` function, which JAX runs under a trace)."""
+    return _trace_state_clean()
 
 #: XLA:CPU options of the compile-bound kernels (module docstring).
 FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
@@ -46,7 +52,7 @@ class TopLevelOptionsJit:
         functools.update_wrapper(self, fun)
 
     def __call__(self, *args, **kwargs):
-        return (self._top if _top_level() else self._nested)(*args, **kwargs)
+        return (self._top if top_level() else self._nested)(*args, **kwargs)
 
     def __getattr__(self, name):
         return getattr(self._top, name)
