@@ -200,7 +200,7 @@ def test_model_surface_and_torsion_gradients():
 
     sym = symmetric_directions(3)
     args = (K0, q0, grid[[1, 5]] * 0.9)
-    vg = jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2)))  # one compile for values and gradients
+    vg = pj.fast_compile_jit(jax.value_and_grad(loss, argnums=(0, 1, 2)))  # one compile for both
     grads = vg(*args)[1]
     for i, (a, g) in enumerate(zip(args, grads)):
         dirs = sym if a.shape == (3, 3) else None

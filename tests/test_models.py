@@ -107,7 +107,7 @@ def test_field_gradients_match_central_differences(kind):
         return jnp.sum(c * jnp.sin(3.0 * _model(kind, WRIST, KJ, q_rest, W).velocity(q, F)))
 
     # one compilation: the differences use the value half of the same compiled value_and_grad
-    vg = jax.jit(jax.value_and_grad(loss, argnums=(0, 1, 2, 3, 4)))
+    vg = pj.fast_compile_jit(jax.value_and_grad(loss, argnums=(0, 1, 2, 3, 4)))
     f = lambda *a: vg(*a)[0]  # noqa: E731
     g = vg(q0, F0, W0, KJ_S2, QREST_S2)[1]
     args = [q0, F0, W0, KJ_S2, QREST_S2]

@@ -519,7 +519,7 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
     res, _ = _fit_joint(theta0, jax.tree_util.tree_map(jax.numpy.asarray, jdata), opts=opts, max_steps=50,
                         n_torsion=Np)
     one = jax.tree_util.tree_map(lambda a: a[0], jdata)
-    residual = jax.jit(_joint_residual(dict(opts), Np))
+    residual = pj.fast_compile_jit(_joint_residual(dict(opts), Np))
     x = np.asarray(res.x[0])
     Jac = np.asarray(res.jac[0])
     r = np.asarray(residual(x, one))

@@ -212,7 +212,7 @@ def test_gradients_match_central_differences():
     p0 = {"KJ": jnp.asarray(KJ_S2 / 2), "q_rest": jnp.asarray(QREST_S2), "tau0": jnp.asarray(0.08),
           "tau": jnp.asarray(0.06), "k": jnp.asarray(20.0), "target": jnp.asarray(TG["NW"])}
     # one compilation: the differences use the value half of the same compiled value_and_grad
-    vg = jax.jit(jax.value_and_grad(loss))
+    vg = pj.fast_compile_jit(jax.value_and_grad(loss))
     f = lambda p: vg(p)[0]  # noqa: E731
     flat, unravel = ravel_pytree(p0)
     g = vg(unravel(flat))[1]  # unravel's (strong) dtypes, as in the differences: no second compile
@@ -338,8 +338,8 @@ def test_folded_forward_jacobians_match_central_differences():
             return jax.vmap(jax.jacfwd(final))(thetas, targets)
 
     thetas = jnp.array([[0.08, 0.06], [0.1, 0.05]])
-    J = np.asarray(jax.jit(jac)(thetas))
-    f = jax.jit(jax.vmap(final))
+    J = np.asarray(pj.fast_compile_jit(jac)(thetas))
+    f = pj.fast_compile_jit(jax.vmap(final))
     for i in range(2):
         e = np.zeros((2, 2))
         e[:, i] = 1e-6
