@@ -79,7 +79,7 @@ def stiffness_from_params(s, n: int, trace: float = 4.0):
     return _stiffness_from_params(_params_vector("s", s, n, n * (n + 1) // 2 - 1), n, trace)
 
 
-@partial(jax.jit, static_argnums=1)
+@partial(fast_compile_jit, static_argnums=1)
 def _stiffness_from_params(s, n, trace):
     idx = _sym_index(n)
     S = jnp.zeros((n, n), s.dtype)
@@ -133,7 +133,7 @@ def donders_coefficients(params, n: int, trace: float = 4.0):
     return _donders_coefficients(_params_vector("params", params, n, n_k + n), n, trace)
 
 
-@partial(jax.jit, static_argnums=1)
+@partial(fast_compile_jit, static_argnums=1)
 def _donders_coefficients(params, n, trace):
     n_k = n * (n + 1) // 2 - 1
     KJ = _stiffness_from_params(params[:n_k], n, trace)

@@ -49,7 +49,6 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.stats
 
 from pmpjax import (
     DIRECTIONS,
@@ -200,6 +199,8 @@ def _ttest(a, popmean=0.0):
     a = a[np.isfinite(a)]
     if a.size < 2 or np.ptp(a) == 0:
         return np.nan
+    import scipy.stats  # (imported here: 1 s at `import fitting`)
+
     return float(scipy.stats.ttest_1samp(a, popmean).pvalue)
 
 
@@ -217,7 +218,7 @@ def _epochs(target):
     return starts, ends
 
 
-@jax.jit
+@fast_compile_jit
 def _joint_angles_jit(quat):
     return joint_angles_from_quat(quat)
 

@@ -151,7 +151,7 @@ class _Motions:
         return self.duration / self.recording
 
 
-@jax.jit
+@fast_compile_jit
 def _fk_jac_rows(chain, q):
     x, J = chain.fk_jac_soa(q.T)
     return x.T, jnp.moveaxis(J, -1, 0)
@@ -387,7 +387,7 @@ def _host_rows(fn, *rows):
     return row_chunks(fn, *rows, small=64, chunk=64)
 
 
-@partial(jax.jit, static_argnums=1)
+@partial(fast_compile_jit, static_argnums=1)
 def _unpack_rows(theta, cfg: _Config, elbow) -> dict:
     """:func:`_unpack` of rows ``theta`` (B, p), ``elbow`` (B,) in one compiled call."""
     return jax.vmap(lambda th, e: _unpack(th, cfg, e))(theta, elbow)

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import as_array, check_positive, check_positive_int, pytree_dataclass, to_jax
+from pmpjax.internal import as_array, check_positive, check_positive_int, fast_compile_jit, pytree_dataclass, to_jax
 
 from .examples import _check_key
 from .weights import estimate_ik_weights
@@ -40,7 +40,7 @@ def ik_decomposition(qdot, xdot, J, w):
     return _decompose(jnp.asarray(qdot), jnp.asarray(xdot), jnp.asarray(J), jnp.asarray(w))
 
 
-@jax.jit
+@fast_compile_jit
 def _decompose(qdot, xdot, J, w):
     wk = jnp.broadcast_to(w[..., None, :], J.shape[:-2] + w.shape[-1:])
     task = jnp.einsum("...ij,...j->...i", pj.weighted_pinv(J, w=wk), xdot)
@@ -55,7 +55,7 @@ def contribution_coefficients(w):
     return _contributions(to_jax(w))
 
 
-@jax.jit
+@fast_compile_jit
 def _contributions(w):
     inv = 1.0 / w
     return inv / jnp.sum(inv, axis=-1, keepdims=True)
@@ -247,7 +247,7 @@ def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
     return HotellingResult(t2=t2, f=f, df1=to_jax(np.asarray(df1)), df2=to_jax(np.asarray(df2)), p=pval)
 
 
-@partial(jax.jit, static_argnums=2)
+@partial(fast_compile_jit, static_argnums=2)
 def _hotelling(a, b, paired):
     """``T²``, ``F``, the pooled covariance and the p-value of :func:`hotelling_t2` (one compiled call)."""
     p = a.shape[1]

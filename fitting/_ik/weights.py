@@ -353,7 +353,7 @@ _SCREEN_MESSAGES = ("`qdot` contains NaN or inf", "`xdot` contains NaN or inf", 
                     "`J` is rank-deficient (rank < m) at sample {}", "`mask` leaves no valid sample")
 
 
-@jax.jit
+@fast_compile_jit
 def _screen_codes(qdot, xdot, J, valid, rank_tol):
     """Per item (B,): 0 usable, else 1 + the index of the first problem in ``_SCREEN_MESSAGES``;
     and the first rank-deficient valid sample. ``qdot`` (B, K, n), ``xdot`` (B, K, m),

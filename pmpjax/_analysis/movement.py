@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.interpolate import make_smoothing_spline
 
 from .._base.validate import as_array
 
@@ -57,6 +56,8 @@ def smooth_path(t, x, *, lam: float | None = None) -> SmoothedPath:
         raise ValueError("`x` contains NaN or inf")
     if np.any(np.diff(t) <= 0):
         raise ValueError("`t` must be strictly increasing")
+    from scipy.interpolate import make_smoothing_spline  # (imported here: 0.7 s at `import pmpjax`)
+
     if lam is None:  # GCV per component (SciPy's choice, as the paper's Dohrmann filter)
         spline = _ComponentSplines([make_smoothing_spline(t, x[:, j]) for j in range(x.shape[1])])
     else:

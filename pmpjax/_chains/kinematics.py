@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import on_host
+from .._base.compile import fast_compile_jit
 from .._base.linalg import det, from_soa, mm, to_soa
 from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
 from .._base.rotations import rotation_matrix
@@ -140,7 +141,7 @@ def manipulability(chain: Chain, q):
     return manipulability_soa(chain.fk_jac_soa(to_soa(jnp.asarray(q)))[1])
 
 
-@partial(jax.jit, static_argnums=1)
+@partial(fast_compile_jit, static_argnums=1)
 def _per_item(chain, which: int, q):
     """``fk`` (``which`` 0) or ``jacobian`` (1) of ``q`` (..., n) in one compiled call."""
     return chain._per_item(which, q)

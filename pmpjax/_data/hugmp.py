@@ -21,10 +21,10 @@ import os
 from importlib import resources
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from .._base.batching import bucket, pad_rows
+from .._base.compile import fast_compile_jit
 from .._base.validate import check_positive_int
 from .matlab import _as_path, mat_version
 
@@ -201,7 +201,7 @@ def motion_kinematics(q, chain, *, fs: float = 100.0, window: float = 0.15, samp
     return qs, qd, np.einsum("sij,sj->si", J, qd), J
 
 
-@jax.jit
+@fast_compile_jit
 def _jac_soa(chain, qc):
     return chain.fk_jac_soa(qc)[1]
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from functools import partial
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.compile import fast_compile_jit
 from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
 from .._base.validate import as_array, check_positive, check_spd, to_jax
 
@@ -120,7 +120,7 @@ def _operator(which, J, W=None, w=None, tau_el=None):
     return _operator_jit(which, J, W, w, tau_el)
 
 
-@partial(jax.jit, static_argnums=0)
+@partial(fast_compile_jit, static_argnums=0)
 def _operator_jit(which, J, W, w, tau_el):
     n = J.shape[-1]
     Js, A = _bcast(to_soa(J, 2), _admittance(n, W, w))

@@ -365,12 +365,12 @@ def _rollout_c(arm: CogArm, q_set, K, B, q0, qdot0, probe, force, nthread):
     return (q, qd, q_set, tau, touch, hand, ()), q_after[:, -1], qd_after[:, -1]
 
 
-@jax.jit
+@fast_compile_jit
 def _controller_init(controller, q_set0):
     return jax.vmap(controller.init)(q_set0)
 
 
-@jax.jit
+@fast_compile_jit
 def _controller_step_c(controller, c, t, q, qdot, q_hold, touch, hand, grav, q_sensed, inp, K):
     """One closed-loop controller step for a flat batch (C backend)."""
 

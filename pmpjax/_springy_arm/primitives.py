@@ -81,7 +81,7 @@ def winner_take_all(scores, P):
     return _winner(scores, P)
 
 
-@jax.jit
+@fast_compile_jit
 def _winner(scores, P):
     onehot = jax.nn.one_hot(jnp.argmax(scores, axis=-1), P.shape[-2], dtype=P.dtype)
     return jnp.einsum("...k,...kn->...n", onehot, P)
@@ -318,7 +318,7 @@ def move_velocity(moves: Moves, t):
     return _move_velocity(moves, _check_times(t))
 
 
-@jax.jit
+@fast_compile_jit
 def _move_velocity(moves, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]  # (T, M)
     return (minimum_jerk(s)[1] / moves.duration[None, :]) @ moves.delta
@@ -337,7 +337,7 @@ def summed_moves(moves: Moves, start, t):
     return _summed_moves(moves, to_jax(start, float), _check_times(t))
 
 
-@jax.jit
+@fast_compile_jit
 def _summed_moves(moves, start, t):
     s = (t[:, None] - moves.t0[None, :]) / moves.duration[None, :]
     return start[None, :] + minimum_jerk(s)[0] @ moves.delta, _move_velocity(moves, t)

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._base.compile import fast_compile_jit
 from .._base.validate import as_array, to_jax
 
 
@@ -40,7 +40,7 @@ def _check_line(path, start, end):
     return path, start, end
 
 
-@jax.jit
+@fast_compile_jit
 def _areas(path, start, end):
     lead = jnp.broadcast_shapes(path.shape[:-2], start.shape[:-1], end.shape[:-1])
     path = jnp.concatenate([jnp.broadcast_to(start, lead + (2,))[..., None, :],
@@ -74,7 +74,7 @@ def curvature_measures(path, start, end, *, scale: float = np.pi / 12):
     return _measures(path, start, end, scale)
 
 
-@jax.jit
+@fast_compile_jit
 def _measures(path, start, end, scale):
     a_r, a_l = _areas(path, start, end)
     return (a_r + a_l) / scale**2, (a_r - a_l) / scale**2

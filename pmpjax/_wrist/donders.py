@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import on_host
+from .._base.compile import fast_compile_jit
 from .._base.pytree import pytree_dataclass
 from .._base.validate import as_array, check_positive, check_positive_int, to_jax
 from .._chains.kinematics import Wrist
@@ -57,7 +58,7 @@ def evaluate_surface(coef, r_y, r_z):
     return _evaluate(coef, r_y, r_z)
 
 
-@jax.jit
+@fast_compile_jit
 def _evaluate(coef, r_y, r_z):
     shape = jnp.broadcast_shapes(coef.shape[:-1], r_y.shape, r_z.shape)
     A = _design(jnp.broadcast_to(r_y, shape), jnp.broadcast_to(r_z, shape))
@@ -75,14 +76,14 @@ def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 
     return _surface_grid(coef, extent, n)
 
 
-@partial(jax.jit, static_argnums=2)
+@partial(fast_compile_jit, static_argnums=2)
 def _surface_grid(coef, extent, n):
     g = jnp.linspace(-extent, extent, n)
     ry, rz = jnp.meshgrid(g, g, indexing="ij")
     return ry, rz, _evaluate(coef[..., None, None, :], ry, rz)
 
 
-@jax.jit
+@fast_compile_jit
 def _fit(r, w):
     A = _design(r[..., 1], r[..., 2]) * w[..., None]
     b = r[..., 0] * w

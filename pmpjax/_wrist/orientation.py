@@ -22,11 +22,11 @@ from __future__ import annotations
 
 from functools import partial
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import eager_rows
+from .._base.compile import fast_compile_jit
 from .._base.validate import as_array, is_concrete, to_jax
 from .._chains.kinematics import Wrist
 
@@ -54,7 +54,7 @@ def wrist_rotation(q):
     return eager_rows(_rotation, _arr("q", q, (3,)), 1)
 
 
-@jax.jit
+@fast_compile_jit
 def _rotation(q):
     return _WRIST.rotation(q)
 
@@ -74,7 +74,7 @@ def quat_from_matrix(R):
     return eager_rows(_quat_from_matrix, _arr("R", R, (3, 3)), 2)
 
 
-@jax.jit
+@fast_compile_jit
 def _quat_from_matrix(R):
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     tr = m00 + m11 + m22
@@ -103,7 +103,7 @@ def matrix_from_quat(quat):
     return eager_rows(_matrix_from_quat, _quat("quat", quat), 1)
 
 
-@jax.jit
+@fast_compile_jit
 def _matrix_from_quat(quat):
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     w, x, y, z = (quat[..., i] for i in range(4))
@@ -124,7 +124,7 @@ def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
     return eager_rows(lambda q: _rotvec_from_quat(q, convention), _quat("quat", quat), 1)
 
 
-@partial(jax.jit, static_argnums=1)
+@partial(fast_compile_jit, static_argnums=1)
 def _rotvec_from_quat(quat, convention):
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     quat = jnp.where(quat[..., :1] < 0, -quat, quat)
@@ -144,7 +144,7 @@ def quat_from_rotvec(r):
     return eager_rows(_quat_from_rotvec, _arr("r", r, (3,)), 1)
 
 
-@jax.jit
+@fast_compile_jit
 def _quat_from_rotvec(r):
     t2 = jnp.sum(r * r, axis=-1)
     small = t2 < 1e-8
@@ -176,7 +176,7 @@ def joint_angles_from_matrix(R):
     return eager_rows(_joint_angles_from_matrix, _arr("R", R, (3, 3)), 2)
 
 
-@jax.jit
+@fast_compile_jit
 def _joint_angles_from_matrix(R):
     b = jnp.arctan2(-R[..., 0, 1], jnp.hypot(R[..., 0, 0], R[..., 0, 2]))
     c = jnp.arctan2(R[..., 0, 2], R[..., 0, 0])
@@ -209,7 +209,7 @@ def torsion_between(R_ref, R):
     return _torsion_between(_arr("R_ref", R_ref, (3, 3)), _arr("R", R, (3, 3)))
 
 
-@jax.jit
+@fast_compile_jit
 def _torsion_between(R_ref, R):
     M = jnp.swapaxes(R_ref, -1, -2) @ R
     return jnp.arctan2(M[..., 2, 1] - M[..., 1, 2], M[..., 1, 1] + M[..., 2, 2])

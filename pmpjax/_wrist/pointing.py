@@ -41,11 +41,11 @@ import os
 import warnings
 from functools import partial
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._base.batching import bucket, head_rows, pad_rows
+from .._base.compile import fast_compile_jit
 from .._base.pytree import replace
 from .._base.validate import check_positive_int, is_concrete
 from .._chains.kinematics import Wrist
@@ -463,7 +463,7 @@ def _nullspace_direction(q):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-@jax.jit
+@fast_compile_jit
 def _imu_quaternions(q, eps):
     """Quaternions (N, 4) of ``R(q) exp(ε̂)``: postures ``q`` (N, 3) seen through IMU noise ``ε``."""
     return quat_from_matrix(wrist_rotation(q) @ matrix_from_rotvec(eps))
