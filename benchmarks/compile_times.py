@@ -87,6 +87,20 @@ and 181 → 163 s wall (339 → 267 and 337 → 301 s CPU). Also tried (NIO fit,
 ``--xla_llvm_disable_expensive_passes`` 9.4 / 0.55, ``--xla_cpu_max_isa=AVX2`` 8.8 / 0.62,
 ``--xla_cpu_use_thunk_runtime=false`` 10.0 / 0.70, ``--xla_cpu_parallel_codegen_split_count=1``
 (simulate) no gain.
+
+Session 10 (2026-12-02 15:55–16:00 UTC, idle; A/B against 6600550 in alternating fresh processes,
+two rounds, compile / run [s]): ``simulate`` below 1 025 movements now runs its RK4 stages in a
+loop and compiles top-level calls with the legacy emitters (eager calls skip its
+``custom_jvp``/``custom_vmap`` wrappers, under which JAX dropped the options): simulate 4.54, 3.42
+→ 3.13, 3.03 (run 0.017 → 0.008–0.010), simulate_final 4.06, 4.27 → 2.89, 2.45, figure3_data 5.76,
+5.34 → 4.35, 4.32. Every other library kernel now uses ``fast_compile_jit`` too: estimate_ik_weights
+(its input screening) 3.55, 3.20 → 2.32, 2.44 (run 0.64, 0.44 → 0.49, 0.31). pointing_pipeline
+3.94, 3.34 → 4.27, 3.55 and equilibrium_posture 2.35, 2.29 → 2.60, 2.20: unchanged within noise
+(the pipeline's first call now also imports SciPy's splines, moved out of ``import pmpjax``).
+Measured in the kernel alone (B = 8–10 000, every step saved, XLA compile / run):
+unrolled + defaults 2.9–3.7 s, stage loop + defaults 2.2–2.9 s, stage loop + legacy emitters
+1.7–1.9 s; runs at B = 1 000 0.20–0.22 → 0.24–0.27 s, at B = 10 000 1.8–2.0 → 2.1–2.3 s (so
+large batches keep the unrolled kernel); LLVM ``-O0`` on top (0.8 s) runs 2–10× slower.
 """
 
 # ruff: noqa: E501  (the pasted result tables above)

@@ -15,7 +15,10 @@ Compared in the same run (see ``_baselines.py``, which re-implements the field f
 
 JAX rows: ``compile`` = ``_run.lower(...).compile()`` of the jitted function behind ``simulate``
 (trace+lower reported separately); ``kernel`` = the compiled executable alone; ``call`` = the public
-``pmpjax.simulate`` (input checks, RK4 stability check, ``block_until_ready``). Times are the
+``pmpjax.simulate`` (input checks, RK4 stability check, ``block_until_ready``). The kernel is the
+one ``simulate`` runs at that batch size: since 2026-12-02 (session 10) up to 1 024 movements a
+compile-light variant (RK4 stages in a loop, XLA's legacy emitters; ``_simulate._primal_run``), so
+the B = 1/100/1 000 rows below, measured before, show the unrolled kernel. Times are the
 minimum of several repeats (other engineers share the machine). Rates use the ``call`` time.
 
 Peak memory, per batch size in a fresh subprocess: ``xla`` = argument + output + temp buffers of the

@@ -376,7 +376,8 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
 
     **Compile time:** the first call with a new batch shape, ``duration``/``dt``, ``saveat`` or
-    model type compiles the whole RK4 scan: ≈ 5 s on a 2-core CPU at the Figure-3 size, ≈ 12 s for
+    model type compiles the whole RK4 scan: ≈ 3 s on a 2-core CPU at the Figure-3 size (8
+    movements; up to 1 024 movements the compile-light kernel, was 3.4–4.5 s), ≈ 12 s for
     ``jax.grad`` through it (idle; benchmarks/compile_times.py). Later calls reuse it; turn on JAX's
     persistent compilation cache (``jax_compilation_cache_dir``; the command line does) to keep it
     across processes.
