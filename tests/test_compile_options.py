@@ -34,3 +34,23 @@ def test_bad_input():
         pj.fast_compile_jit(3)
     with pytest.raises(TypeError, match="`compiler_options` must be a dict"):
         pj.fast_compile_jit(_newton_sqrt, compiler_options=["xla_cpu_enable_fast_math"])
+
+
+def test_eager_small_simulate_runs_the_option_compiled_light_kernel():
+    """An eager ``simulate`` of a small batch compiles the light kernel with the options at the top
+    level (fails if the call goes through the custom_jvp/custom_vmap wrappers, under which JAX
+    drops them, or takes the unrolled kernel); inside a caller's ``jit`` the options stay out."""
+    from pmpjax._pmp import simulate as sim
+
+    model = pj.Lambda0PMP(pj.Wrist(1.0), KJ=np.diag([0.5, 1.5, 2.0]), q_rest=np.zeros(3),
+                          W=0.08 * np.diag([0.5, 1.5, 2.0]))
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+    q0, tg = np.zeros((3, 3)), np.full((3, 2), 0.05)
+    # a schedule no other test uses, so that the first call here compiles
+    run = lambda: pj.simulate(model, planner, q0, tg, duration=0.03, dt=0.01)  # noqa: E731
+    top, unrolled = sim._run_light._top._cache_size(), sim._run._cache_size()
+    eager = run()
+    assert sim._run_light._top._cache_size() == top + 1 and sim._run._cache_size() == unrolled
+    jitted = jax.jit(lambda: run().q)()
+    assert sim._run_light._top._cache_size() == top + 1  # traced into the caller's jit instead
+    np.testing.assert_allclose(jitted, eager.q, rtol=0, atol=1e-15)

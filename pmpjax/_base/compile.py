@@ -40,6 +40,7 @@ def top_level() -> bool:
     ``custom_jvp``/``custom_vmap`` function, which JAX runs under a trace)."""
     return _trace_state_clean()
 
+
 #: XLA:CPU options of the compile-bound kernels (module docstring).
 FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 

@@ -15,7 +15,7 @@ import numpy as np
 from jax import lax
 
 from .._base.batching import flatten_batch, on_host
-from .._base.compile import FAST_COMPILE, TopLevelOptionsJit, fast_compile_jit, top_level
+from .._base.compile import fast_compile_jit, top_level
 from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
@@ -398,7 +398,7 @@ _RUN_STATICS = ("h", "batch", "n_steps", "include_initial", "singular_tol", "sin
 
 
 def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-         single, stage_loop=False):
+               single, stage_loop=False):
     """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
     n, m = chain.n, chain.m
@@ -467,4 +467,4 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
 
 #: The kernel, and the compile-light kernel for small batches (:func:`_primal_run`).
 _run = jax.jit(_movements, static_argnames=_RUN_STATICS)
-_run_light = TopLevelOptionsJit(_movements, FAST_COMPILE, static_argnames=_RUN_STATICS)
+_run_light = fast_compile_jit(_movements, static_argnames=_RUN_STATICS)
