@@ -42,7 +42,13 @@ def test_ik_parts_report_the_papers_quantities(run):
     hug = res["ik_hugmp"]["results"]
     w, lo, hi = (np.array(hug[k]) for k in ("w", "lo", "hi"))
     finite = np.isfinite(w) & np.isfinite(lo) & np.isfinite(hi)
-    assert finite.any() and np.all((lo[finite] <= w[finite] + 1e-9) & (w[finite] <= hi[finite] + 1e-9))
+    assert finite.any() and np.all(lo[finite] <= hi[finite] + 1e-12)
+    assert np.all((lo[finite] >= 0) & (hi[finite] <= 1 + 1e-12))
+    # Percentile intervals of a max-normalised estimate need not contain it: where the largest
+    # weight switches joints between replicates, the point estimate's 1 can lie above every
+    # replicate's value of that joint (seen once in 96 entries at 10 replicates). Most contain it.
+    inside = (lo[finite] <= w[finite] + 1e-9) & (w[finite] <= hi[finite] + 1e-9)
+    assert inside.mean() > 0.9, inside.mean()
 
 
 def test_sweeps_part_curvature_map_is_point_symmetric(run):

@@ -78,7 +78,10 @@ def test_gcv_lambda_matches_scipys_generalised_cross_validation():
         ours = make_smoothing_spline(t, y[:, c], lam=lam[c])(t)
         # Same criterion, same minimiser: the fits agree far below the noise (1.5 mm).
         assert np.max(np.abs(ours - ref)) < 5e-5
-    assert float(pj.gcv_lambda(t, y[:, 0])) == pytest.approx(lam[0], rel=1e-12)
+    # The 1-D call is the first column's λ (the two differ tenfold). Not to the last bit: BLAS takes
+    # other paths for one column and two, and the GCV score is flat enough near its minimum that
+    # an ulp moves the golden-section minimiser by ~1e-7 relative (seen with NumPy 2.4's OpenBLAS).
+    assert float(pj.gcv_lambda(t, y[:, 0])) == pytest.approx(lam[0], rel=1e-5)
     with pytest.raises(ValueError, match="`t` must be strictly"):
         pj.gcv_lambda(t[::-1], y)
     with pytest.raises(ValueError, match="must agree"):

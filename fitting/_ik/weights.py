@@ -191,8 +191,13 @@ def _qp_update(w, psi, omega, w_min, w_max, fixed):
     wn = jnp.clip(raw, w_min, w_max)
     free = jnp.asarray([not f for f in fixed]).reshape((-1,) + (1,) * (wn.ndim - 1))
     # over-specified joints (Experiment 1): set back to 1, normalise the others only
-    top = jnp.max(jnp.where(free, wn, -jnp.inf), axis=0, keepdims=True)
-    return jnp.where(free, wn / top, 1.0)
+    scored = jnp.where(free, wn, -jnp.inf)
+    top = jnp.max(scored, axis=0, keepdims=True)
+    # XLA may evaluate ``wn`` in the max and in the division with different FMA contractions, so
+    # ``wn / top`` can miss 1 by an ulp at the largest weight: set that one to exactly 1.
+    joint = jnp.arange(wn.shape[0]).reshape((-1,) + (1,) * (wn.ndim - 1))
+    largest = joint == jnp.argmax(scored, axis=0, keepdims=True)
+    return jnp.where(free & ~largest, jnp.minimum(wn / top, 1.0), 1.0)
 
 
 def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, max_iter, fixed):
