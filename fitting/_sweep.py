@@ -70,6 +70,7 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.extend.core
 import numpy as np
 
 from pmpjax import Status
@@ -226,9 +227,11 @@ def _resolve_devices(devices):
     raise TypeError(f"`devices` must be None, a device count or a list of jax devices, got {devices!r}")
 
 
-def _trace(fn, numeric):
-    """Trace ``vmap(fn)`` on one abstract row: output structure and the computation's identity."""
-    spec = {k: jax.ShapeDtypeStruct((1,) + v.shape[1:], v.dtype) for k, v in numeric.items()}
+def _trace(fn, numeric, rows):
+    """Trace ``vmap(fn)`` on ``rows`` abstract rows (a chunk): output structure, the computation's
+    identity and its closed jaxpr (the one-device kernel replays it instead of tracing ``fn`` again:
+    a row that fits or simulates takes seconds to trace)."""
+    spec = {k: jax.ShapeDtypeStruct((rows,) + v.shape[1:], v.dtype) for k, v in numeric.items()}
     try:
         closed, shapes = jax.make_jaxpr(jax.vmap(fn), return_shape=True)(spec)
     except _TRACER_ERRORS as e:
@@ -254,7 +257,13 @@ def _trace(fn, numeric):
         a = np.asarray(c)
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(np.ascontiguousarray(a).tobytes())
-    return jax.tree_util.tree_structure(shapes), out, h.hexdigest()
+    return jax.tree_util.tree_structure(shapes), out, h.hexdigest(), closed
+
+
+def _replay(closed, treedef):
+    """``vmap(fn)`` as its traced jaxpr: ``{name: (rows, ...)} -> outputs``."""
+    flat = jax.extend.core.jaxpr_as_fun(closed)
+    return lambda args: jax.tree_util.tree_unflatten(treedef, flat(*jax.tree_util.tree_leaves(args)))
 
 
 def _leaf_name(path) -> str:
@@ -416,7 +425,8 @@ class _LocalEngine:
     #: chunks dispatched beyond the one being stored (XLA's CPU client may run them concurrently)
     ahead = 2
 
-    def __init__(self, fn, devices, chunk_rows, kernel_key):
+    def __init__(self, fn, devices, chunk_rows, kernel_key, traced=None):
+        """``traced``: ``vmap(fn)`` replayed from its jaxpr at ``chunk_rows`` rows (one device)."""
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
         d = len(devices)
@@ -430,7 +440,7 @@ class _LocalEngine:
         self.kernel = self._kernels.pop(key, None)
         if self.kernel is None:
             if d == 1:
-                self.kernel = fast_compile_jit(jax.vmap(fn))
+                self.kernel = fast_compile_jit(traced if traced is not None else jax.vmap(fn))
             else:
                 spec = PartitionSpec("rows")
                 self.kernel = fast_compile_jit(jax.shard_map(jax.vmap(fn), mesh=mesh, in_specs=spec, out_specs=spec,
@@ -571,7 +581,8 @@ def sweep(
     chunk_rows = min(int(chunk_size), n)
     n_chunks = math.ceil(n / chunk_rows)
 
-    treedef, leaves, computation = _trace(fn, numeric)
+    # (traced at the chunk's length, which the fingerprint holds anyway, not at the device count's)
+    treedef, leaves, computation, closed = _trace(fn, numeric, chunk_rows)
     fingerprint = {
         "fn": f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', type(fn).__name__)}",
         "fn_source": _source_hash(fn),
@@ -627,7 +638,7 @@ def sweep(
     try:
         if todo:
             engine = (_DaskEngine(fn, client, chunk_rows, kernel_key) if client is not None
-                      else _LocalEngine(fn, devs, chunk_rows, kernel_key))
+                      else _LocalEngine(fn, devs, chunk_rows, kernel_key, _replay(closed, treedef)))
             engine.run(todo, chunk_params, done)
     finally:
         bar.stop()

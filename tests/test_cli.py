@@ -96,6 +96,26 @@ def _tiny_part(ctx):
     return {"value": 1.5}
 
 
+def _affinity_part(ctx):
+    """Reports the cores its worker may run on."""
+    time.sleep(1.5)  # (both workers take one)
+    return {"pid": os.getpid(), "cores": sorted(os.sched_getaffinity(0))}
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="needs two usable cores (Linux)")
+def test_two_workers_run_on_disjoint_cores(tmp_path, monkeypatch):
+    """Each of two workers is pinned to its half of the cores (unpinned, XLA gives each worker a
+    thread per core and the two compete for both)."""
+    monkeypatch.setattr(_cli, "available_parts", lambda: {"a": _affinity_part, "b": _affinity_part})
+    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    a, b = res["a"]["results"], res["b"]["results"]
+    assert a["pid"] != b["pid"]
+    usable = sorted(os.sched_getaffinity(0))
+    assert not set(a["cores"]) & set(b["cores"]) and sorted(a["cores"] + b["cores"]) == usable
+    assert abs(len(a["cores"]) - len(b["cores"])) <= 1
+
+
 def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, monkeypatch):
     from importlib.metadata import EntryPoint
 

@@ -89,7 +89,7 @@ def test_one_compilation_whatever_the_chunk_count():
 
     res = fitting.sweep(counted, PARAMS, chunk_size=5, progress=False, devices=1)  # 5 chunks, last padded
     np.testing.assert_array_equal(res.outputs, PARAMS["a"] * 2.0)
-    assert len(traces) == 2  # one trace for the fingerprint, one for the single compilation
+    assert len(traces) == 1  # one trace: the fingerprint's jaxpr is the one compilation's
 
 
 def _shards(out):
