@@ -233,11 +233,16 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     return cache
 
 
-#: Wall seconds per part of idle cold runs, two parts at a time (``--jobs 2``; 2026-12-02, 2-core
-#: AMD EPYC Zen 4 KVM): the order in which parallel workers take the parts (longest first) when
-#: ``results.json`` has no times yet; ``--quick`` (``--no-cache``, 08:56 UTC) and the full run (08:37).
-PART_SECONDS = {"pointing": 59, "reaching": 39, "sweeps": 32, "donders_nio": 28, "primitives": 15,
-                "ik_figures": 12, "ik_synthetic": 12, "ik_hugmp": 9, "figure3": 4, "figure4": 1}
+#: Wall seconds per part of idle cold runs, two parts at a time (``--jobs 2``, 2-core AMD EPYC Zen 4
+#: KVM): the order in which parallel workers take the parts (longest first) when ``results.json``
+#: has no times yet; ``--quick`` (``--no-cache``, pinned workers, 2026-12-04) and the full run
+#: (2026-12-02 08:37 UTC).
+PART_SECONDS = {"pointing": 33, "reaching": 27, "sweeps": 16, "primitives": 8, "ik_figures": 8,
+                "ik_hugmp": 8, "ik_synthetic": 8, "figure3": 4, "donders_nio": 3, "figure4": 1}
+#: Parts that reuse another part's compilations (donders_nio's NIO fit has the shapes of
+#: pointing's): with both to run, the follower waits for its leader and then runs on the worker that
+#: ran it (in process, whether or not the compilation cache is on; 3 s instead of 12).
+FOLLOWS = {"donders_nio": "pointing"}
 PART_SECONDS_FULL = {"reaching": 79, "pointing": 69, "ik_hugmp": 62, "sweeps": 50, "donders_nio": 21,
                      "ik_synthetic": 13, "primitives": 12, "ik_figures": 12, "figure3": 5, "figure4": 1}
 
@@ -379,9 +384,9 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
-def _pin_to_share(slot, n_workers: int) -> None:
-    """Restrict this worker to its share of the usable cores (the ``slot.value``-th of
-    ``n_workers`` disjoint shares; one core each when there are more workers than cores).
+def _pin_to_share(slot: int, n_workers: int) -> None:
+    """Restrict this worker to its share of the usable cores (the ``slot``-th of ``n_workers``
+    disjoint shares; one core each when there are more workers than cores).
 
     XLA sizes its CPU thread pools by the cores a process may use, so unpinned workers each run
     as many threads as there are cores and the two workers of a 2-core run take turns on both:
@@ -389,11 +394,8 @@ def _pin_to_share(slot, n_workers: int) -> None:
     (2-core Zen 4, idle, 2026-12-04). Linux only (elsewhere a no-op)."""
     if not hasattr(os, "sched_setaffinity"):
         return
-    with slot.get_lock():
-        i = slot.value
-        slot.value += 1
     cores = sorted(os.sched_getaffinity(0))
-    share = cores[i % n_workers::n_workers] if n_workers <= len(cores) else [cores[i % len(cores)]]
+    share = cores[slot::n_workers] if n_workers <= len(cores) else [cores[slot % len(cores)]]
     with contextlib.suppress(OSError):
         os.sched_setaffinity(0, share)
 
@@ -401,8 +403,8 @@ def _pin_to_share(slot, n_workers: int) -> None:
 def _worker_init(queue, cache_dir, log_dir, parent=None, slot=None, n_workers=1) -> None:
     """Set up a spawned worker like the parent: float64, the compilation cache, Agg; its stdout and
     stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log``, not the console; it
-    ends with ``parent``; with a ``slot`` counter it runs on its share of the cores (before JAX
-    sizes its thread pools)."""
+    ends with ``parent``; with a ``slot`` it runs on its share of the cores (set before JAX sizes
+    its thread pools)."""
     if parent is not None:
         _die_with_parent(parent)
     if slot is not None:
@@ -476,9 +478,11 @@ def _resolve(part):
 
 
 def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, record) -> None:
-    """Run ``todo`` (in that order) on ``n_workers`` spawned processes, recording each entry as it
-    arrives. A crashed worker breaks the pool: the parts that were running are re-run one at a time
-    alone, and the one that crashes again alone is recorded as failed; the others resume in parallel."""
+    """Run ``todo`` (in that order) on ``n_workers`` spawned processes, one part at a time each,
+    recording each entry as it arrives; a :data:`FOLLOWS` part runs right after its leader on the
+    leader's worker. A part whose worker crashes is re-run alone at the end (on a fresh worker,
+    with nothing else running) and recorded as failed if it crashes again; its worker is replaced
+    and the other parts go on."""
     import multiprocessing as mp
     import threading
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -496,9 +500,13 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
     started: dict[str, int] = {}
     pump = threading.Thread(target=ui.pump, args=(queue, started), daemon=True)
     pump.start()
-    pending = list(todo)
-    suspects: list[str] = []
     t_start: dict[str, float] = {}
+
+    def worker(slot, n):
+        """A one-process executor pinned to share ``slot`` of ``n`` (None: not pinned)."""
+        return ProcessPoolExecutor(1, mp_context=ctx, initializer=_worker_init,
+                                   initargs=(queue, cache_dir and str(cache_dir), str(log_dir), os.getpid(),
+                                             slot, n))
 
     def failed(name, error, doc=""):
         """The entry of a part that ended without its worker's entry."""
@@ -511,51 +519,73 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
         return failed(name, f"worker process crashed (messages in {log_dir})",
                       (inspect.getdoc(_resolve(_portable(parts[name]))) or "").split("\n\n")[0])
 
+    def collect(fut, name) -> bool:
+        """Record the part of a finished future; False if its worker crashed."""
+        try:
+            entry = fut.result()
+        except BrokenProcessPool:
+            ui.finished(name)
+            return False
+        except Exception as e:  # (the part could not be sent or its results not returned)
+            (out / f"{name}.error.txt").write_text(traceback.format_exc())
+            entry = failed(name, f"{type(e).__name__}: {e}")
+            ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))}")
+        ui.finished(name)
+        record(name, entry)
+        return True
+
+    def send(pool, name):
+        ui.submitted(name)
+        t_start.setdefault(name, time.perf_counter())
+        return pool.submit(_worker_run, name, _portable(parts[name]), str(out), quick, seed)
+
+    pools = [worker(i, n_workers) for i in range(n_workers)]
+    suspects: list[str] = []
     try:
-        while pending or suspects:
-            alone = bool(suspects)
-            batch = [suspects.pop(0)] if alone else pending
-            if not alone:
-                pending = []
-            with ProcessPoolExecutor(1 if alone else n_workers, mp_context=ctx, initializer=_worker_init,
-                                     initargs=(queue, cache_dir and str(cache_dir), str(log_dir), os.getpid(),
-                                               None if alone else ctx.Value("i", 0), n_workers)) as ex:
-                futs = {}
-                for name in batch:
-                    ui.submitted(name)
-                    t_start.setdefault(name, time.perf_counter())
-                    futs[ex.submit(_worker_run, name, _portable(parts[name]), str(out), quick, seed)] = name
-                waiting = set(futs)
-                while waiting:
-                    done, waiting = wait(waiting, return_when=FIRST_COMPLETED)
-                    broken = False
-                    for fut in done:
-                        name = futs[fut]
-                        try:
-                            entry = fut.result()
-                        except BrokenProcessPool:
-                            broken = True
-                            continue
-                        except Exception as e:  # (the part could not be sent or its results not returned)
-                            (out / f"{name}.error.txt").write_text(traceback.format_exc())
-                            entry = failed(name, f"{type(e).__name__}: {e}")
-                            ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))}")
-                        ui.finished(name)
-                        record(name, entry)
-                    if broken:
-                        time.sleep(0.2)  # (let the pump see the last start messages)
-                        lost = [futs[f] for f in futs if not f.done() or isinstance(f.exception(), BrokenProcessPool)]
-                        for name in lost:
-                            ui.finished(name)
-                            if alone:
-                                record(name, crashed(name))
-                            elif name in started:
-                                suspects.append(name)
-                            else:
-                                pending.append(name)
-                        break
-            started.clear()
+        unsent = list(todo)
+        held = {f: lead for f, lead in FOLLOWS.items() if f in unsent and lead in unsent}
+
+        def take(after=None):
+            """The next part: ``after``'s follower, else the first part not waiting for a leader."""
+            name = next((f for f, lead in held.items() if lead == after), None) if after else None
+            name = name or next((n for n in unsent if n not in held), None)
+            if name is not None:
+                held.pop(name, None)
+                unsent.remove(name)
+            return name
+
+        running = {}  # future -> (part, worker index)
+        for w in range(n_workers):
+            if (name := take()) is not None:
+                running[send(pools[w], name)] = (name, w)
+        idle = [w for w in range(n_workers) if w not in {v[1] for v in running.values()}]
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for fut in done:
+                name, w = running.pop(fut)
+                if not collect(fut, name):
+                    suspects.append(name)
+                    pools[w].shutdown(wait=False, cancel_futures=True)
+                    pools[w] = worker(w, n_workers)
+                for f in [f for f, lead in held.items() if lead == name][1:]:
+                    held.pop(f)  # (the first follower runs next; further ones are released)
+                if (nxt := take(after=name)) is not None:
+                    running[send(pools[w], nxt)] = (nxt, w)
+                else:
+                    idle.append(w)
+                while idle and (nxt := take()) is not None:
+                    w2 = idle.pop(0)
+                    running[send(pools[w2], nxt)] = (nxt, w2)
+        for pool in pools:
+            pool.shutdown()
+        for name in suspects:  # alone, so that another part's crash or load cannot be the cause
+            pool = worker(None, 1)
+            if not collect(send(pool, name), name):
+                record(name, crashed(name))
+            pool.shutdown(wait=False, cancel_futures=True)
     finally:
+        for pool in pools:
+            pool.shutdown(wait=False, cancel_futures=True)
         queue.put(None)
         pump.join(timeout=5)
         manager.shutdown()

@@ -116,6 +116,26 @@ def test_two_workers_run_on_disjoint_cores(tmp_path, monkeypatch):
     assert abs(len(a["cores"]) - len(b["cores"])) <= 1
 
 
+def _timed_part(ctx):
+    """Sleeps; reports its worker and when it ran."""
+    t0 = time.time()
+    time.sleep(2.0 if ctx.name == "lead" else 0.3)
+    return {"pid": os.getpid(), "start": t0, "end": time.time()}
+
+
+def test_a_follower_part_runs_after_its_leader_on_the_leaders_worker(tmp_path, monkeypatch):
+    """FOLLOWS (donders_nio after pointing, whose NIO compilation it reuses): submitted second, the
+    follower would start at once on the other worker; it waits and runs where its leader ran."""
+    names = ["lead", "follower", "o1", "o2", "o3"]
+    monkeypatch.setattr(_cli, "available_parts", lambda: dict.fromkeys(names, _timed_part))
+    monkeypatch.setattr(_cli, "FOLLOWS", {"follower": "lead"})
+    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    r = {n: res[n]["results"] for n in names}
+    assert all(res[n]["status"] == "ok" for n in names)
+    assert r["follower"]["pid"] == r["lead"]["pid"] and r["follower"]["start"] >= r["lead"]["end"]
+    assert all(r[n]["pid"] != r["lead"]["pid"] for n in ("o1", "o2", "o3"))  # the other worker meanwhile
+
+
 def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, monkeypatch):
     from importlib.metadata import EntryPoint
 
