@@ -55,7 +55,7 @@ class IKWeightsResult:
     ``error_history`` (..., max_iter) one entry per iteration (NaN after the item stopped);
     ``iterations`` (...,) updates done; ``gamma`` (...,) the null-space ratio at the end;
     ``status`` (...,) int ``pj.Status`` code: ``SUCCESSFUL`` the paper's criterion ``e ≤ ε`` (line 2)
-    was met; ``STALLED`` the weights stopped moving (no weight changed by more than ``step_tol``: a
+    was met; ``STALLED`` the weights stopped moving (every weight changed by less than ``step_tol``: a
     fixed point of the update) with ``e > ε``; ``SCHEDULE_END`` a γ schedule drove γ towards 1, which
     shrinks the error and the updates whatever the weights (Eq 17), and ended the run before
     ``e ≤ ε`` was met at the starting ratio; ``MAX_STEPS`` ``max_iter`` updates without a stop;
@@ -247,7 +247,9 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
                                            jnp.inf), err)
         scheduled = rate > 0
         status = jnp.select(
-            [~finite, e_hat <= tol, scheduled & ((err <= tol) | (step <= step_tol)), step <= step_tol],
+            # (``<``: step_tol = 0 turns the rule off, also at an exact fixed point, which the exact
+            # normalisation of ``_qp_update`` now reaches)
+            [~finite, e_hat <= tol, scheduled & ((err <= tol) | (step < step_tol)), step < step_tol],
             [Status.NONFINITE, Status.SUCCESSFUL, Status.SCHEDULE_END, Status.STALLED],
             Status.MAX_STEPS).astype(jnp.int32)
         stop = status != Status.MAX_STEPS
@@ -441,8 +443,8 @@ def estimate_ik_weights(
     drops it, which makes the update scale-free: with the bound, raw weights above 1 are clipped
     before the normalisation and their ratios are lost, which can stall the iteration); ``tol``
     the mean-error threshold ε of the paper's stopping rule ``e ≤ ε`` (line 2; status
-    ``SUCCESSFUL``); ``step_tol`` stop (status ``STALLED``) when no weight changes by more than
-    this, a fixed point of the update whose error is above ε (with ``γ < 1`` the error of Eq 17
+    ``SUCCESSFUL``); ``step_tol`` stop (status ``STALLED``) when every weight changes by less than
+    this (0: never), a fixed point of the update whose error is above ε (with ``γ < 1`` the error of Eq 17
     rarely reaches a small ε: the paper's Fig 1 ends near 0.07, so most runs end ``STALLED``, and
     ``w`` is then the fixed point); ``max_iter`` iteration cap (status ``MAX_STEPS``);
     ``gamma_rate`` c of the schedule ``γ ← γ + c (1 − γ)`` after each iteration (None: constant;
