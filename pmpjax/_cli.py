@@ -235,16 +235,15 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
 
 #: Wall seconds per part of idle cold runs, two parts at a time (``--jobs 2``, 2-core AMD EPYC Zen 4
 #: KVM): the order in which parallel workers take the parts (longest first) when ``results.json``
-#: has no times yet; ``--quick`` (``--no-cache``, pinned workers, 2026-12-04) and the full run
-#: (2026-12-02 08:37 UTC).
+#: has no times yet; ``--quick`` and the full run (``--no-cache``, pinned workers, 2026-12-04).
 PART_SECONDS = {"pointing": 33, "reaching": 27, "sweeps": 16, "primitives": 8, "ik_figures": 8,
                 "ik_hugmp": 8, "ik_synthetic": 8, "figure3": 4, "donders_nio": 3, "figure4": 1}
 #: Parts that reuse another part's compilations (donders_nio's NIO fit has the shapes of
 #: pointing's): with both to run, the follower waits for its leader and then runs on the worker that
 #: ran it (in process, whether or not the compilation cache is on; 3 s instead of 12).
 FOLLOWS = {"donders_nio": "pointing"}
-PART_SECONDS_FULL = {"reaching": 79, "pointing": 69, "ik_hugmp": 62, "sweeps": 50, "donders_nio": 21,
-                     "ik_synthetic": 13, "primitives": 12, "ik_figures": 12, "figure3": 5, "figure4": 1}
+PART_SECONDS_FULL = {"ik_hugmp": 73, "reaching": 46, "pointing": 33, "sweeps": 31, "ik_synthetic": 11,
+                     "primitives": 8, "ik_figures": 8, "figure3": 3, "donders_nio": 2, "figure4": 1}
 
 
 def default_jobs() -> int:
