@@ -116,6 +116,17 @@ pass), a third of the 350 ms gap to the final-only call. ``lax.empty`` lowers to
 and XLA's uninitialised ``AllocateBuffer`` custom call has no CPU implementation (tried: "No
 registered implementation ... for Host"), so the zero fill stays.
 
+Where the every-step time goes (2026-12-04 04:40 UTC, idle, B = 10 000, minimum of 5 interleaved
+rounds, the kernel edited for each row and reverted; wall / CPU): final only 620–640 ms / 1.16–1.21 s;
+every step 905 ms / 1.56 s (1.42×). Computing and staging the saved observations without any
+output buffer: 740 ms (1.19×); the same plus materialising the 353 MB output (no writes in the
+loop): 815 ms (1.28×); plus the loop's block writes: 905 ms. So ≈ 120 ms is the observations
+(ẋ = J q̇, the manipulability and the block staging of 11 values × B per step), ≈ 75 ms the fresh
+output's allocation and fill, ≈ 90 ms the writes. The block size hardly matters (4, 16, 50
+samples: 908, 906, 944 ms) and neither do glibc's huge pages or heap reuse on this day
+(``hugetlb=1`` 1.58×, ``mmap_max=0`` 1.55×, both noisier). The 1.3× target would need the output
+fill gone, which XLA:CPU cannot skip (above): not met.
+
 Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
 
 | what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
