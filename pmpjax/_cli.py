@@ -7,8 +7,9 @@ self-contained, and ``report.md``). Results are written after every part, so an 
 loses nothing; a re-run skips parts already finished (with the same ``--quick``) unless
 ``--force``; a failing part is reported and the others still run (exit status 1 when any part
 failed). ``--jobs N`` (default: the usable cores) runs the parts in N spawned worker processes,
-longest first (the run is compile bound and XLA compiles on one thread); ``--jobs 1`` runs them
-in this process. Workers' own output (JAX, XLA, MuJoCo) goes to ``DIR/_logs/``, kept only if
+each on its share of the cores, longest first (the run is compile bound and XLA compiles on one
+thread), a part that reuses another's compilations right after it on its worker (``FOLLOWS``);
+``--jobs 1`` runs them in this process. Workers' own output (JAX, XLA, MuJoCo) goes to ``DIR/_logs/``, kept only if
 not empty; their log lines and progress bars appear in this process's display.
 
 Parts are built in (Figure 3, Figure 4, the postural primitives) or registered by installed packages under the
@@ -267,11 +268,14 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     (module-level functions or entry points); a worker that crashes fails its part, the others
     still run.
 
-    Measured (2-core AMD EPYC Zen 4 KVM, idle, 2026-12-02, ``jobs=2``): the full run cold
-    (``--no-cache``) 181 s wall / 336 s user CPU; ``--quick`` cold 112 s / 211 s, with a fresh
-    cache 101 s / 190 s, warm (a second run) 33 s / 56 s. On cores shared with other jobs (load
-    5–9) a second worker gains nothing (cold ``--quick`` ``jobs=2`` 782 s / 512 s; warm cache
-    ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s): one process already uses more than one core.
+    Measured (2-core AMD EPYC Zen 4 KVM, idle, 2026-12-04, ``jobs=2``, pinned workers): the full
+    run cold (``--no-cache``) 106 s wall / 183 s user CPU (the previous stop's code in the same
+    session: 127 s / 222 s), with a fresh cache 109 s, warm (a second run) 83 s (bound by
+    ik_hugmp's bootstrap, 66–74 s of computing); ``--quick`` cold 47–56 s / 85–100 s, with a fresh
+    cache 56–60 s, warm 27–29 s / 43–46 s. (On 2026-12-02 the machine was about twice as slow:
+    the full run cold 181 s, ``--quick`` 112 s.) On cores shared with other jobs (load 5–9) a
+    second worker gained nothing (2026-12-02: cold ``--quick`` ``jobs=2`` 782 s / 512 s; warm
+    cache ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s).
     """
     import jax
 
@@ -389,8 +393,9 @@ def _pin_to_share(slot: int, n_workers: int) -> None:
 
     XLA sizes its CPU thread pools by the cores a process may use, so unpinned workers each run
     as many threads as there are cores and the two workers of a 2-core run take turns on both:
-    cold ``reproduce --quick --jobs 2`` 69.4 s wall / 128 s CPU unpinned, 64.8 s / 116 s pinned
-    (2-core Zen 4, idle, 2026-12-04). Linux only (elsewhere a no-op)."""
+    cold ``reproduce --quick --jobs 2``, alternating runs, unpinned 54.7 s and 49.3 s wall (98.6,
+    88.6 s CPU), pinned 47.4 s and 48.5 s (84.5, 87.3 s CPU) (2-core Zen 4, idle, 2026-12-04).
+    Linux only (elsewhere a no-op)."""
     if not hasattr(os, "sched_setaffinity"):
         return
     cores = sorted(os.sched_getaffinity(0))
