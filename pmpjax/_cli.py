@@ -501,8 +501,7 @@ def _run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, 
     manager = SyncManager(ctx=ctx)
     manager.start(_die_with_parent, (os.getpid(),))
     queue = manager.Queue()
-    started: dict[str, int] = {}
-    pump = threading.Thread(target=ui.pump, args=(queue, started), daemon=True)
+    pump = threading.Thread(target=ui.pump, args=(queue,), daemon=True)
     pump.start()
     t_start: dict[str, float] = {}
 
@@ -677,7 +676,7 @@ class _UI:
         finally:
             self.finished(name)
 
-    def pump(self, queue, started: dict) -> None:
+    def pump(self, queue) -> None:
         """Show the workers' messages until ``None`` arrives: ("start", part, pid), ("log", text),
         ("progress", key, part, description, done, total), ("progress_end", key)."""
         while True:
@@ -689,7 +688,6 @@ class _UI:
                 return
             kind = msg[0]
             if kind == "start":
-                started[msg[1]] = msg[2]
                 self.started(msg[1])
                 continue
             if kind == "log":
