@@ -105,10 +105,15 @@ def spd_inv(M):
 
 def det(M):
     """Determinant of a small square ``M`` (m, m, ...) by cofactor expansion (m <= 3) or LU."""
-    m = M.shape[0]
-    if m > 3:
+    if M.shape[0] > 3:
         return jnp.linalg.det(jnp.moveaxis(M, (0, 1), (-2, -1)))
-    M = elements(M)
+    return det_lists(elements(M))
+
+
+def det_lists(M):
+    """Determinant of ``M`` given as nested lists (m × m, m <= 3) of (...) arrays, by cofactors:
+    nothing is stacked, so XLA fuses it into the loop that reads it."""
+    m = len(M)
     if m == 1:
         return M[0][0]
     if m == 2:

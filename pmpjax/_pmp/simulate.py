@@ -413,7 +413,7 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
     n_mov, n_seg = tg.shape[0], t0s.shape[0]
     # Saved: the start of every segment (the first unless `include_initial`) and the last end.
     S, offset = n_seg + include_initial, 1 - include_initial
-    comps = (n, m, n, m, 1)
+    comps = ((n,), (m,), (n,), (m,), ())
     step_h = hs if h is None else h
 
     def field(t, qc, args):
@@ -423,14 +423,14 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
         P, M = admittance_terms_soa(J, consts["A"])
         qd = model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
         w = manipulability_soa(J)
-        return qd, (qc, x, qd, mv(J, qd), w[None])
+        return qd, (qc, x, qd, mv(J, qd), w)
 
     def write(acc, j, obs, valid):
-        """Samples ``obs`` (K, comp, B) into rows ``j, ..., j + K − 1`` of the (B, M·S, comp) outputs."""
+        """Samples ``obs`` (K, *comp, B) into rows ``j, ..., j + K − 1`` of the (B, M·S, *comp) outputs."""
         bufs, fin, wmin = acc
         bufs = tuple(lax.dynamic_update_slice_in_dim(b, jnp.moveaxis(o, -1, 0), j, axis=1)
                      for b, o in zip(bufs, obs))
-        w = lax.stop_gradient(obs[4][:, 0])
+        w = lax.stop_gradient(obs[4])
         fin = fin & (jnp.logical_not(valid) | jnp.all(jnp.isfinite(obs[0]), axis=(0, 1)))
         wmin = jnp.where(valid, jnp.minimum(wmin, jnp.min(jnp.where(jnp.isfinite(w), w, 0.0), axis=0)), wmin)
         return bufs, fin, wmin
@@ -454,14 +454,16 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
         return (qc, acc), None
 
-    bufs = tuple(jnp.zeros((B, n_mov * S, c), q.dtype) for c in comps)
+    # Distinct fills: XLA would merge equal ones (q and q̇, x and ẋ) and copy them apart (a whole-output
+    # copy each); every row is overwritten.
+    bufs = tuple(jnp.full((B, n_mov * S) + c, float(i), q.dtype) for i, c in enumerate(comps))
     acc = (bufs, jnp.ones((B,), bool), jnp.full((B,), jnp.inf, q.dtype))
     (qT, (bufs, fin, wmin)), _ = lax.scan(movement, (q, acc), (jnp.arange(n_mov), tg))
     fin = fin & jnp.all(jnp.isfinite(qT), axis=0)
     status = jnp.where(~fin, int(NONFINITE), jnp.where(wmin < singular_tol, int(SINGULAR), int(OK)))
     lead = batch if single else batch + (n_mov,)
-    q_, x_, qd_, xd_, w_ = (b.reshape(lead + (S, c)) for b, c in zip(bufs, comps))
-    return Trajectory(t=t0s, q=q_, x=x_, qdot=qd_, xdot=xd_, manipulability=w_[..., 0],
+    q_, x_, qd_, xd_, w_ = (b.reshape(lead + (S,) + c) for b, c in zip(bufs, comps))
+    return Trajectory(t=t0s, q=q_, x=x_, qdot=qd_, xdot=xd_, manipulability=w_,
                       status=status.reshape(batch))
 
 
