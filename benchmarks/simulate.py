@@ -559,7 +559,9 @@ def _usage():
 
 def bench_saves(B, repeats):
     """Per row: first call (trace + compile + run) [s], then the minimum wall and CPU time and
-    minor page faults per call over ``repeats`` rounds interleaved across rows (same load)."""
+    minor page faults per call over ``repeats`` rounds interleaved across rows (same load), and the
+    median over rounds of the row's time over the final-only call's in the same round (``paired``:
+    robust to the load drifting between rounds, which moves the ratio of minima by ±10 % here)."""
     calls = save_calls(B)
     res = {k: {"save": sv} for k, (sv, _) in calls.items()}
     outs = {}
@@ -570,6 +572,7 @@ def bench_saves(B, repeats):
         print(f"  {k}: first call {res[k]['first_call_s']:.1f} s", flush=True)
     vals = {k: np.asarray(o) for k, o in outs.items() if k.startswith("loss")}
     del outs
+    rounds = {k: [] for k in calls}
     for _ in range(repeats):
         for k, (_, call) in calls.items():
             (c0, f0), t0 = _usage(), time.perf_counter()
@@ -578,6 +581,7 @@ def bench_saves(B, repeats):
             c1, f1 = _usage()
             del out
             r = res[k]
+            rounds[k].append(t)
             r["s"], r["cpu_s"] = min(r.get("s", np.inf), t), min(r.get("cpu_s", np.inf), c1 - c0)
             r["minflt"] = min(r.get("minflt", np.inf), f1 - f0)
     c_rate = res.get("C scalar loop, 1 core", {}).get("s")
@@ -586,6 +590,8 @@ def bench_saves(B, repeats):
         r["steps_per_s"] = B * bl.N_STEPS / r["s"]
         r["vs_final"], r["cpu_vs_final"] = r["s"] / res["final"]["s"], r["cpu_s"] / res["final"]["cpu_s"]
         r["vs_c_loop"] = c_rate / r["s"] if c_rate else None
+    for k, r in res.items():
+        r["paired_vs_final"] = float(np.median(np.asarray(rounds[k]) / np.asarray(rounds["final"])))
     diff = float(np.max(np.abs(vals["loss, vmap of single calls (jit)"] - vals["loss, batched call (jit)"])))
     return res, diff
 
@@ -594,13 +600,13 @@ HUGEPAGES = "glibc.malloc.hugetlb=1"
 
 
 def _saves_table(B, rows, title):
-    L = [f"| {title} (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × C loop | page faults |",
-         "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    L = [f"| {title} (B = {B}) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × final, paired | × C loop | page faults |",
+         "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for k, r in rows.items():
         vc = f"{r['vs_c_loop']:.2f}" if r.get("vs_c_loop") else ""
         comp = "" if k.startswith("C ") else f"{r['compile_s']:.1f}"
         L.append(f"| {k} | {r['save']} | {comp} | {r['s'] * 1e3:.0f} ms | {r['cpu_s'] * 1e3:.0f} ms | "
-                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {vc} | {r['minflt'] / 1e3:.0f} k |")
+                 f"{fmt_rate(r['steps_per_s'])} | {r['vs_final']:.2f}, {r['cpu_vs_final']:.2f} | {r['paired_vs_final']:.2f} | {vc} | {r['minflt'] / 1e3:.0f} k |")
     return L
 
 

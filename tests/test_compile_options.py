@@ -54,3 +54,31 @@ def test_eager_small_simulate_runs_the_option_compiled_light_kernel():
     jitted = jax.jit(lambda: run().q)()
     assert sim._run_light._top._cache_size() == top + 1  # traced into the caller's jit instead
     np.testing.assert_allclose(jitted, eager.q, rtol=0, atol=1e-15)
+
+
+def test_traced_simulate_takes_the_light_kernel_only_for_tiny_batches(monkeypatch):
+    """Inside a caller's ``jit`` the compile options cannot apply, and the stage-loop kernel runs
+    2–3.5× slower than the unrolled one from 32 movements on: traced calls above
+    ``TRACED_SMALL_BATCH`` take the unrolled kernel, eager calls keep the light one up to
+    ``SMALL_BATCH``. Fails if traced calls take the light kernel by the eager rule (or the reverse)."""
+    from pmpjax._pmp import simulate as sim
+
+    taken = []
+    for name in ("_run", "_run_light"):
+        kernel = getattr(sim, name)
+        monkeypatch.setattr(sim, name, lambda *a, _k=kernel, _n=name, **kw: (taken.append(_n), _k(*a, **kw))[1])
+    model = pj.Lambda0PMP(pj.Wrist(1.0), KJ=np.diag([0.5, 1.5, 2.0]), q_rest=np.zeros(3),
+                          W=0.08 * np.diag([0.5, 1.5, 2.0]))
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+
+    def kernels(B, traced):
+        taken.clear()
+        q0, tg = np.zeros((B, 3)), np.full((B, 2), 0.05)
+        run = lambda q, t: pj.simulate(model, planner, q, t, duration=0.03, dt=0.01).q  # noqa: E731
+        jax.make_jaxpr(run)(q0, tg) if traced else run(q0, tg)
+        return list(taken)
+
+    small = sim.TRACED_SMALL_BATCH
+    assert kernels(small, traced=True) == ["_run_light"]
+    assert kernels(small + 1, traced=True) == ["_run"]
+    assert kernels(small + 1, traced=False) == ["_run_light"]

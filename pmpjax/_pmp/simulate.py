@@ -223,7 +223,7 @@ def _kernel(**statics):
 
     @jax.custom_batching.custom_vmap
     def batched(*args):
-        return _primal_run(statics)(*args)
+        return _primal_run(statics, traced=True)(*args)
 
     @batched.def_vmap
     def _rule(axis_size, in_batched, *args):
@@ -247,11 +247,13 @@ def _kernel(**statics):
     return call
 
 
-#: Largest batch (movements) whose primal runs use the compile-light kernel (:func:`_primal_run`).
+#: Largest batch (movements) whose primal runs use the compile-light kernel (:func:`_primal_run`):
+#: top-level calls, and calls traced by a caller's ``jit``/``vmap``.
 SMALL_BATCH = 1024
+TRACED_SMALL_BATCH = 16
 
 
-def _primal_run(statics):
+def _primal_run(statics, traced=False):
     """``_run`` with these static arguments for primal (underived) runs.
 
     Up to :data:`SMALL_BATCH` movements, where the first call is mostly compilation, the four RK4
@@ -260,8 +262,15 @@ def _primal_run(statics):
     2-core Zen 4, 2026-12-02), run time B = 8: 7.7 → 8.5–9.5 ms, B = 1 000: 0.21 → 0.24–0.27 s.
     Larger batches keep the unrolled stages and XLA's defaults: at B = 10 000 the light kernel
     runs 15–30 % slower (1.8–2.0 → 2.1–2.3 s) for the same 1.7 s of compilation saved.
+
+    Inside a caller's ``jit`` (``traced``) the options cannot apply, and the stage loop under XLA's
+    defaults runs 2–3.5× slower than the unrolled stages from B = 32 on (B = 32, 64, 256, 1 000:
+    11, 21, 70, 226 ms against 4, 6, 32, 80 ms, a jitted loss on the every-step trajectory and a
+    jitted final-only run alike, 2026-12-04) for 0.3–0.7 s less compilation: there the light
+    kernel serves only up to :data:`TRACED_SMALL_BATCH` movements (B = 8: 4 against 3 ms, first
+    call 0.7–1.1 s against 1.0–1.2 s).
     """
-    if math.prod(statics["batch"]) <= SMALL_BATCH:
+    if math.prod(statics["batch"]) <= (TRACED_SMALL_BATCH if traced else SMALL_BATCH):
         return partial(_run_light, **statics, stage_loop=True)
     return partial(_run, **statics)
 
