@@ -127,6 +127,66 @@ samples: 908, 906, 944 ms) and neither do glibc's huge pages or heap reuse on th
 (``hugetlb=1`` 1.58×, ``mmap_max=0`` 1.55×, both noisier). The 1.3× target would need the output
 fill gone, which XLA:CPU cannot skip (above): not met.
 
+Save modes (``--saves --saves-repeats 9``), latest: 2026-12-04 19:00 UTC, idle (load 1.2 → 1.7),
+2-core AMD EPYC (Zen 4, KVM), jax 0.10.2. ``× final, paired`` = the median over the 9 rounds of the
+row's time over the final-only call's in the same round (the ratio of minima moves by ±10 % with
+the background load of this VM; the paired median by about ±0.05):
+
+| default allocator (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × final, paired | × C loop | page faults |
+|---|---|---:|---:|---:|---:|---:|---:|---:|---:|
+| final | final | 3.6 | 735 ms | 1385 ms | 5.44 M | 1.00, 1.00 | 1.00 | 1.27 | 0 k |
+| every step | every step | 3.5 | 1102 ms | 1874 ms | 3.63 M | 1.50, 1.35 | 1.43 | 0.85 | 78 k |
+| every 10 | every 10 | 4.7 | 701 ms | 1297 ms | 5.71 M | 0.95, 0.94 | 0.99 | 1.33 | 0 k |
+| ts (40) | ts (40) | 4.2 | 718 ms | 1324 ms | 5.57 M | 0.98, 0.96 | 1.03 | 1.30 | 0 k |
+| loss, batched call (jit) | every step | 3.2 | 759 ms | 1399 ms | 5.27 M | 1.03, 1.01 | 1.03 | 1.23 | 18 k |
+| loss, vmap of single calls (jit) | every step | 3.7 | 748 ms | 1353 ms | 5.35 M | 1.02, 0.98 | 1.02 | 1.25 | 18 k |
+| C scalar loop, 1 core | final |  | 934 ms | 934 ms | 4.28 M | 1.27, 0.67 | 1.22 | 1.00 | 0 k |
+
+With ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` in the same run: every step 1.79× / 1.85× paired
+(2 k page faults), the other rows 0.93–1.08×: huge pages did not help on this day.
+
+Where the every-step time goes, by XLA's own CPU profiler (2026-12-04 18:10–19:10 UTC,
+``jax.profiler.trace(..., create_perfetto_trace=True)``, one call after warm-up, B = 10 000; the
+event durations summed per fused loop): the field's fused loops take the same ≈ 510–630 ms in both
+calls. On top of them the every-step call spends 166 ms in the block writes (five in-place
+``dynamic-update-slice`` loops per 16 samples, 1–2 ms each, run one after the other on one thread:
+XLA:CPU splits loop fusions over the cores but not in-place updates), 80–108 ms filling the fresh
+353 MB output (page faults: NumPy fills fresh memory of this size in 47–50 ms, copies at 26 GB/s),
+≈ 37 ms staging the samples of a block, and ≈ 60 ms in two fused loops per step that stacked the
+manipulability's Gram matrix ``J Jᵀ`` (now built from element lists and fused into the staging:
+16 823 instead of 17 625 field loops per call, as many as the final-only call; no wall-time change
+beyond the noise). Bounds, same method: the
+same kernel writing into a 28 MB ring instead of the 353 MB output runs at 1.13–1.29× the
+final-only call; the 400 one-step segments without any observation at 1.01–1.10×.
+
+Changed this session: the initial fills of the five outputs are distinct constants (XLA merged the
+equal zero fills of q and q̇, x and ẋ and then copied them apart: two whole-output copies) and the
+manipulability has its own (B, S) buffer (it was a reshaped view, copied after the loop): XLA's
+temporaries at B = 10 000 49 → 21 MB (``tests/test_simulate.py::test_every_step_saving_writes_in_place``);
+time within noise (paired medians 1.46 → 1.43, 20 rounds).
+
+Tried and rejected (2026-12-04, same process, variants imported side by side and interleaved,
+15–20 rounds, median of paired ratios, idle): writing the previous block while the next one
+integrates (the writes then depend on the carry only and XLA runs the five on both threads: write
+phases 166 → 135 ms wall; paired 1.35 vs 1.45 in one run, 1.40 vs 1.40 in the next: not kept);
+the same with double-buffered staging in the loop carry (1.42; the stacking adds fused loops);
+block-major sample buffers plus one assembling pass (contiguous block writes, 24 ms instead of
+~200 in the profile, but a second fresh 353 MB buffer: 1.40 vs 1.43–1.47, twice the peak memory);
+staging in the carry instead of per-block scan outputs (1.43 vs 1.45); one packed (11, B) staging
+write per step instead of five (1.56 vs 1.56); one sample per write, no staging (1.56 vs 1.53);
+two independent half-batch loops in one executable, hoping XLA runs them on the two cores (every
+step 1111 vs 875 ms, final 735 vs 618 ms); ``mallopt(M_MMAP_MAX=0, M_TRIM_THRESHOLD=1 GiB)`` at
+run time (1.42 vs 1.43: XLA's buffers come from worker threads' arenas, which fall back to
+``mmap``). So every mode but every-step saving is within 1.1× of the final-only call and at or
+above the C loop; every-step saving stays at 1.4× / 0.85× C: its floor here is XLA:CPU's serial,
+page-faulting writes of a fresh 353 MB output, not the physics.
+
+Found on the way (``--saves --quick``, B = 1 000): inside a caller's ``jit`` the compile-light
+kernel (RK4 stages in a loop) lost its compile options and ran 2–3.5× slower than the unrolled one
+(jitted loss on the every-step trajectory 232 ms, 0.38× C); calls traced by a plain ``jax.jit``
+above 16 movements now take the unrolled kernel: 95 ms, 0.99× C (a caller's ``pj.fast_compile_jit``,
+whose options do apply, keeps the light one: ``simulate._primal_run``).
+
 Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
 
 | what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |

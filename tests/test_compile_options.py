@@ -57,10 +57,12 @@ def test_eager_small_simulate_runs_the_option_compiled_light_kernel():
 
 
 def test_traced_simulate_takes_the_light_kernel_only_for_tiny_batches(monkeypatch):
-    """Inside a caller's ``jit`` the compile options cannot apply, and the stage-loop kernel runs
-    2–3.5× slower than the unrolled one from 32 movements on: traced calls above
-    ``TRACED_SMALL_BATCH`` take the unrolled kernel, eager calls keep the light one up to
-    ``SMALL_BATCH``. Fails if traced calls take the light kernel by the eager rule (or the reverse)."""
+    """Inside a caller's ``jax.jit`` the compile options cannot apply, and the stage-loop kernel runs
+    2–3.5× slower than the unrolled one from 32 movements on: such traced calls above
+    ``TRACED_SMALL_BATCH`` take the unrolled kernel; eager calls, and calls traced for a caller's
+    ``pj.fast_compile_jit`` (whose options do apply), keep the light one up to ``SMALL_BATCH``.
+    Fails if traced calls take the light kernel by the eager rule, or if a fast-compiled caller
+    is not told apart from a plain ``jax.jit``."""
     from pmpjax._pmp import simulate as sim
 
     taken = []
@@ -75,10 +77,18 @@ def test_traced_simulate_takes_the_light_kernel_only_for_tiny_batches(monkeypatc
         taken.clear()
         q0, tg = np.zeros((B, 3)), np.full((B, 2), 0.05)
         run = lambda q, t: pj.simulate(model, planner, q, t, duration=0.03, dt=0.01).q  # noqa: E731
-        jax.make_jaxpr(run)(q0, tg) if traced else run(q0, tg)
+        if traced == "fast_compile_jit.trace":
+            pj.fast_compile_jit(run).trace(q0, tg)
+        elif traced == "fast_compile_jit":
+            pj.fast_compile_jit(run)(q0, tg)
+        else:
+            jax.make_jaxpr(run)(q0, tg) if traced else run(q0, tg)
         return list(taken)
 
     small = sim.TRACED_SMALL_BATCH
     assert kernels(small, traced=True) == ["_run_light"]
     assert kernels(small + 1, traced=True) == ["_run"]
+    assert kernels(sim.SMALL_BATCH, traced="fast_compile_jit.trace") == ["_run_light"]
+    assert kernels(sim.SMALL_BATCH + 1, traced="fast_compile_jit.trace") == ["_run"]
+    assert kernels(small + 1, traced="fast_compile_jit") == ["_run_light"]
     assert kernels(small + 1, traced=False) == ["_run_light"]

@@ -19,11 +19,13 @@ chains' per-item kinematics 13 → 8 s), except where run time at large batches 
 ``pmpjax._pmp.simulate._primal_run``) and the IK weights' Algorithm 1 (0.54 → 0.75 s at Fig 1's
 size).
 Inside a caller's ``jit`` (or ``vmap``/``grad`` trace) the caller's options apply: JAX takes options
-only at the top level.
+only at the top level. :func:`trace_options` tells a kernel which options the top-level call it is
+traced for will compile with (``simulate`` picks its kernel by them).
 """
 
 from __future__ import annotations
 
+import contextvars
 import functools
 
 import jax
@@ -44,6 +46,20 @@ def top_level() -> bool:
 #: XLA:CPU options of the compile-bound kernels (module docstring).
 FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 
+_TRACE_OPTIONS = contextvars.ContextVar("pmpjax_trace_options", default={})
+
+
+def trace_options() -> dict:
+    """The XLA options of the top-level :class:`TopLevelOptionsJit` call (or its ``lower``/``trace``)
+    whose function is being traced; ``{}`` outside one (e.g. inside a plain ``jax.jit``)."""
+    return _TRACE_OPTIONS.get()
+
+
+def fast_compile_applies() -> bool:
+    """True where the code being run or traced compiles with :data:`FAST_COMPILE`'s emitters: at the
+    top level (a kernel's own ``fast_compile_jit``) or traced for a top-level ``fast_compile_jit``."""
+    return top_level() or all(trace_options().get(k, not v) == v for k, v in FAST_COMPILE.items())
+
 
 class TopLevelOptionsJit:
     """Two ``jax.jit`` of one function: with XLA ``options`` for top-level calls (and ``lower``,
@@ -51,15 +67,30 @@ class TopLevelOptionsJit:
     nested ``jit``; the caller's top-level ``jit`` decides the options there)."""
 
     def __init__(self, fun, options, **kwargs):
-        self._top = jax.jit(fun, compiler_options=dict(options), **kwargs)
+        self._options = dict(options)
+        self._top = jax.jit(fun, compiler_options=self._options, **kwargs)
         self._nested = jax.jit(fun, **kwargs)
         functools.update_wrapper(self, fun)
 
     def __call__(self, *args, **kwargs):
-        return (self._top if top_level() else self._nested)(*args, **kwargs)
+        if not top_level():
+            return self._nested(*args, **kwargs)
+        return self._with_options(self._top)(*args, **kwargs)
+
+    def _with_options(self, method):
+        """``method`` with :func:`trace_options` set to this jit's options while it runs (and traces)."""
+        def run(*args, **kwargs):
+            token = _TRACE_OPTIONS.set(self._options)
+            try:
+                return method(*args, **kwargs)
+            finally:
+                _TRACE_OPTIONS.reset(token)
+
+        return run
 
     def __getattr__(self, name):
-        return getattr(self._top, name)
+        attr = getattr(self._top, name)
+        return self._with_options(attr) if name in ("lower", "trace", "eval_shape") else attr
 
 
 def fast_compile_jit(fun=None, **kwargs):
