@@ -19,8 +19,8 @@ chains' per-item kinematics 13 → 8 s), except where run time at large batches 
 ``pmpjax._pmp.simulate._primal_run``) and the IK weights' Algorithm 1 (0.54 → 0.75 s at Fig 1's
 size).
 Inside a caller's ``jit`` (or ``vmap``/``grad`` trace) the caller's options apply: JAX takes options
-only at the top level. :func:`trace_options` tells a kernel which options the top-level call it is
-traced for will compile with (``simulate`` picks its kernel by them).
+only at the top level. :func:`fast_compile_applies` tells a kernel whether the top-level call it
+is traced for compiles with :data:`FAST_COMPILE` (``simulate`` picks its kernel by it).
 """
 
 from __future__ import annotations
@@ -46,19 +46,16 @@ def top_level() -> bool:
 #: XLA:CPU options of the compile-bound kernels (module docstring).
 FAST_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 
+#: The XLA options of the top-level :class:`TopLevelOptionsJit` call (or its ``lower``/``trace``)
+#: whose function is being traced; ``{}`` outside one (e.g. inside a plain ``jax.jit``).
 _TRACE_OPTIONS = contextvars.ContextVar("pmpjax_trace_options", default={})
-
-
-def trace_options() -> dict:
-    """The XLA options of the top-level :class:`TopLevelOptionsJit` call (or its ``lower``/``trace``)
-    whose function is being traced; ``{}`` outside one (e.g. inside a plain ``jax.jit``)."""
-    return _TRACE_OPTIONS.get()
 
 
 def fast_compile_applies() -> bool:
     """True where the code being run or traced compiles with :data:`FAST_COMPILE`'s emitters: at the
     top level (a kernel's own ``fast_compile_jit``) or traced for a top-level ``fast_compile_jit``."""
-    return top_level() or all(trace_options().get(k, not v) == v for k, v in FAST_COMPILE.items())
+    options = _TRACE_OPTIONS.get()
+    return top_level() or all(options.get(k, not v) == v for k, v in FAST_COMPILE.items())
 
 
 class TopLevelOptionsJit:
@@ -78,7 +75,7 @@ class TopLevelOptionsJit:
         return self._with_options(self._top)(*args, **kwargs)
 
     def _with_options(self, method):
-        """``method`` with :func:`trace_options` set to this jit's options while it runs (and traces)."""
+        """``method`` with this jit's options in ``_TRACE_OPTIONS`` while it runs (and traces)."""
         def run(*args, **kwargs):
             token = _TRACE_OPTIONS.set(self._options)
             try:
