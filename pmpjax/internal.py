@@ -20,6 +20,7 @@ from ._base.compile import fast_compile_jit as fast_compile_jit
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first
 from ._base.linalg import det as det
+from ._base.linalg import det_lists as det_lists
 from ._base.linalg import mv as mv
 from ._base.linalg import to_soa as to_soa
 

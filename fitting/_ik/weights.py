@@ -29,7 +29,7 @@ from pmpjax.internal import (
     as_array,
     check_positive,
     check_positive_int,
-    det,
+    det_lists,
     fast_compile_jit,
     flatten_batch,
     is_concrete,
@@ -373,7 +373,7 @@ def _screen_codes(qdot, xdot, J, valid, rank_tol):
     JJ = [[sum(Jz[i][c] * Jz[j][c] for c in range(n)) for j in range(m)] for i in range(m)]
     tr = sum(JJ[i][i] for i in range(m)) / m
     # det(JJᵀ)/(tr/m)^m ≤ λ_min/λ_mean: a scale-free test for a rank-deficient Jacobian
-    ratio = det(jnp.stack([jnp.stack(r) for r in JJ])) / jnp.where(tr > 0, tr, 1.0) ** m
+    ratio = det_lists(JJ) / jnp.where(tr > 0, tr, 1.0) ** m
     sing = ((ratio <= rank_tol) | (tr <= 0)) & valid
     bad += [jnp.any(sing, axis=-1), ~jnp.any(valid, axis=-1)]
     code = jnp.zeros(valid.shape[:1], jnp.int32)

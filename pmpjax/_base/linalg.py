@@ -111,9 +111,11 @@ def det(M):
 
 
 def det_lists(M):
-    """Determinant of ``M`` given as nested lists (m × m, m <= 3) of (...) arrays, by cofactors:
-    nothing is stacked, so XLA fuses it into the loop that reads it."""
+    """Determinant of ``M`` given as nested lists (m × m) of (...) arrays: by cofactors for m <= 3
+    (nothing is stacked, so XLA fuses it into the loop that reads it), by LU above."""
     m = len(M)
+    if m > 3:
+        return det(jnp.stack([jnp.stack(r) for r in M]))
     if m == 1:
         return M[0][0]
     if m == 2:

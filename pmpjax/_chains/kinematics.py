@@ -17,7 +17,7 @@ import numpy as np
 
 from .._base.batching import on_host
 from .._base.compile import fast_compile_jit
-from .._base.linalg import det, det_lists, elements, from_soa, mm, to_soa
+from .._base.linalg import det_lists, elements, from_soa, to_soa
 from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
 from .._base.rotations import rotation_matrix
 from .._base.trig import sincos
@@ -151,8 +151,6 @@ def manipulability_soa(J):
     """``sqrt(det(J Jᵀ))`` (...) of a component-leading Jacobian ``J`` (m, n, ...) (the kernel of
     :func:`manipulability`, for integrators)."""
     m, n = J.shape[:2]
-    if m > 3:
-        return jnp.sqrt(jnp.maximum(det(mm(J, jnp.swapaxes(J, 0, 1))), 0.0))
     # J Jᵀ as element lists: a stacked Gram matrix is an extra fused loop per call (per RK4 step
     # when simulate saves it).
     r = elements(J)
