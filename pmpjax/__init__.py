@@ -26,6 +26,7 @@ from ._data.matlab import write_ik_dataset as write_ik_dataset
 from ._data.matlab import write_mat as write_mat
 from ._pmp.equilibria import Equilibrium as Equilibrium
 from ._pmp.equilibria import equilibrium_posture as equilibrium_posture
+from ._pmp.integrate import SOLVERS as SOLVERS
 from ._pmp.models import PMP1 as PMP1
 from ._pmp.models import PMP2 as PMP2
 from ._pmp.models import Lambda0PMP as Lambda0PMP

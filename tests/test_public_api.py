@@ -18,7 +18,7 @@ TESTS = Path(__file__).parent
 #: Result containers, constants, enums and abstract bases: constructed by the library, not users.
 NOT_ENTRY_POINTS = {
     "pj.ArmEquilibrium", "pj.ArmTrajectory", "pj.Chain", "pj.DIRECTIONS", "pj.DondersSurface",
-    "pj.Equilibrium", "pj.FIGURE3", "pj.Planner", "pj.ReflexNetwork", "pj.Status", "pj.SmoothedPath",
+    "pj.Equilibrium", "pj.FIGURE3", "pj.Planner", "pj.SOLVERS", "pj.ReflexNetwork", "pj.Status", "pj.SmoothedPath",
     "pj.Subject", "pj.TARGET_RADIUS", "pj.Trajectory", "pj.HugmpSubject", "pj.DondersRecording",
     "pj.MOVEMENT_LABELS", "pj.PointingRecording", "pj.SyntheticPointing",
     "fitting.BlendFit", "fitting.BootstrapResult", "fitting.DondersFit", "fitting.HotellingResult",

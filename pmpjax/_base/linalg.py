@@ -95,6 +95,56 @@ def _ldl_solve_lists(M, *bs):
     return out
 
 
+def lu_factor_lists(M):
+    """LU factorisation with partial pivoting of a small general matrix given as nested lists
+    (m × m) of (...) arrays, each batch element pivoting on its own: returns ``(L, U, swaps)``
+    for :func:`lu_solve_lists` (unrolled at trace time: elementwise selects and multiply-adds
+    that XLA fuses into the loop around it; one division per column)."""
+    m = len(M)
+    A = [list(row) for row in M]
+    L = [[None] * m for _ in range(m)]
+    swaps = []
+    for k in range(m):
+        best, idx = A[k][k], jnp.full(jnp.shape(A[k][k]), k)
+        for r in range(k + 1, m):
+            take = jnp.abs(A[r][k]) > jnp.abs(best)
+            best, idx = jnp.where(take, A[r][k], best), jnp.where(take, r, idx)
+        for r in range(k + 1, m):
+            s = idx == r
+            for c in range(m):
+                A[k][c], A[r][c] = jnp.where(s, A[r][c], A[k][c]), jnp.where(s, A[k][c], A[r][c])
+            for c in range(k):
+                L[k][c], L[r][c] = jnp.where(s, L[r][c], L[k][c]), jnp.where(s, L[k][c], L[r][c])
+        swaps.append(idx)
+        inv = 1.0 / A[k][k]
+        for r in range(k + 1, m):
+            L[r][k] = A[r][k] * inv
+            for c in range(k + 1, m):
+                A[r][c] = A[r][c] - L[r][k] * A[k][c]
+        A[k][k] = inv  # (U's diagonal kept inverted: solves multiply)
+    return L, A, swaps
+
+
+def lu_solve_lists(lu, b):
+    """Solve ``M y = b`` for ``lu = lu_factor_lists(M)`` and ``b`` a list of m (...) arrays."""
+    L, U, swaps = lu
+    m = len(b)
+    y = list(b)
+    for k in range(m):
+        for r in range(k + 1, m):
+            s = swaps[k] == r
+            y[k], y[r] = jnp.where(s, y[r], y[k]), jnp.where(s, y[k], y[r])
+    for i in range(m):
+        for k in range(i):
+            y[i] = y[i] - L[i][k] * y[k]
+    x = [None] * m
+    for i in reversed(range(m)):
+        for k in range(i + 1, m):
+            y[i] = y[i] - U[i][k] * x[k]
+        x[i] = y[i] * U[i][i]
+    return x
+
+
 def spd_inv(M):
     """Inverse of SPD ``M`` (m, m, ...), column by column through :func:`spd_solve`."""
     m = M.shape[0]

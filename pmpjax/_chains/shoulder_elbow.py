@@ -15,13 +15,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass, static_field
-from .._base.rotations import matmul_rows, rotation_rows
+from .._base.rotations import _add, _mul, matmul_rows, rotation_rows
+from .._base.trig import sincos
 from .._base.validate import as_array, check_positive
 from .kinematics import Chain
 
 
 def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    """``a × b`` of 3-lists whose entries may be the Python floats 0.0 / 1.0 (skipped)."""
+    def sub(u, v):
+        return _add(u, _mul(-1.0, v)) if not isinstance(v, float) else _add(u, -v)
+
+    return [sub(_mul(a[1], b[2]), _mul(a[2], b[1])), sub(_mul(a[2], b[0]), _mul(a[0], b[2])),
+            sub(_mul(a[0], b[1]), _mul(a[1], b[0]))]
 
 
 @pytree_dataclass
@@ -48,23 +54,23 @@ class ShoulderElbowArm(Chain):
             object.__setattr__(self, name, jnp.asarray(v, dtype=float))
 
     def fk_jac_soa(self, qc):
-        q1, q2, q3, q4 = qc[0], qc[1], qc[2], qc[3]
-        R1 = rotation_rows(0, q1)
-        R12 = matmul_rows(R1, rotation_rows(1, q2))
-        R123 = matmul_rows(R12, rotation_rows(2, -q3))
-        R1234 = matmul_rows(R123, rotation_rows(1, -q4))
+        s, c = sincos(qc)
+        R1 = rotation_rows(0, sin_cos=(s[0], c[0]))
+        R12 = matmul_rows(R1, rotation_rows(1, sin_cos=(s[1], c[1])))
+        R123 = matmul_rows(R12, rotation_rows(2, sin_cos=(-s[2], c[2])))
+        R1234 = matmul_rows(R123, rotation_rows(1, sin_cos=(-s[3], c[3])))
         L1, L2 = self.L1, self.L2
         elbow = [-L1 * R123[i][2] for i in range(3)]
         p = [elbow[i] - L2 * R1234[i][2] for i in range(3)]
-        one, zero = jnp.ones_like(q1), jnp.zeros_like(q1)
-        a1 = [one, zero, zero]
+        a1 = [1.0, 0.0, 0.0]
         a2 = [R1[i][1] for i in range(3)]
         a3 = [-R12[i][2] for i in range(3)]
         a4 = [-R123[i][1] for i in range(3)]
         fore = [p[i] - elbow[i] for i in range(3)]
         cols = [_cross(a1, p), _cross(a2, p), _cross(a3, p), _cross(a4, fore)]
-        J = jnp.stack([jnp.stack([cols[j][i] for j in range(4)]) for i in range(3)])
-        return jnp.stack(p), J
+        full = lambda v: jnp.zeros_like(qc[0]) + v if isinstance(v, float) else v  # noqa: E731
+        J = jnp.stack([jnp.stack([full(cols[j][i]) for j in range(4)]) for i in range(3)])
+        return jnp.stack([full(v) for v in p]), J
 
     def reachable(self, x):
         r = np.linalg.norm(np.asarray(x, dtype=float), axis=-1)

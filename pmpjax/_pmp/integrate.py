@@ -1,30 +1,45 @@
-"""The one ODE integrator: classical fixed-step RK4 in nested ``lax.scan`` loops.
+"""The one ODE integrator: fixed-step classical RK4 or the L-stable Rosenbrock method RODAS4, in
+nested ``lax.scan`` loops.
 
-Chosen by measurement against diffrax (``benchmarks/integrators.py``): on 0.4 s wrist movements
-at dt = 1 ms it is 8e-13 rad accurate (fourth order: 1.1e-11 at 2 ms), as fast per step as
-diffrax's fixed-step solvers, and compiles faster; fixed steps keep shapes static (a batch moves
-in lockstep, saves fall on the step grid, cost is known in advance), reverse mode through
-``scan`` gives the exact gradient of the discrete solution, and the core needs no diffrax.
-An adaptive Tsit5 needs ~5× fewer evaluations for 1e-9 rad final postures: use a larger ``dt``
-(``simulate`` refuses unstable ones) when such accuracy suffices.
+**RK4** (default) was chosen by measurement against diffrax (``benchmarks/integrators.py``): on
+0.4 s wrist movements at dt = 1 ms it is 8e-13 rad accurate (fourth order: 1.1e-11 at 2 ms), as
+fast per step as diffrax's fixed-step solvers, and compiles faster. Being explicit, it is stable
+only for ``|λ| h < 2.78``, and Eq 10's gain makes the λ0-PMP stiff (fastest rate
+``cond(J W⁻¹ Jᵀ)/τ0``): anisotropic stiffness needs thousands of steps per movement.
 
-The time axis is cut into ``len(t0s)`` save segments, each integrated with ``n_steps`` equal RK4
+**RODAS4** (Hairer & Wanner, *Solving ODEs II*, IV.7; the coefficients of their ``rodas.f``):
+a linearly implicit (Rosenbrock) method of order 4 with six stages, L-stable and stiffly accurate,
+so stiff modes are damped at any step size and the step is set by accuracy alone. One step costs
+the exact Jacobian ``∂f/∂y`` and ``∂f/∂t`` by forward-mode autodiff (``n + 1`` JVPs of one
+linearisation), one LU factorisation with partial pivoting of ``I/(γh) − ∂f/∂y`` per trajectory
+(unrolled over the components, batch trailing) and six field evaluations; no Newton iteration,
+so the cost of a step is fixed and batches stay in lockstep. Chosen by measurement against
+diffrax's Kvaerno5/KenCarp4 and SciPy's Radau/BDF (``benchmarks/stiff.py``).
+
+Fixed steps keep shapes static (a batch moves in lockstep, saves fall on the step grid, cost is
+known in advance), forward and reverse mode through ``scan`` give the exact derivative of the
+discrete solution, and the core needs no diffrax.
+
+The time axis is cut into ``len(t0s)`` save segments, each integrated with ``n_steps`` equal
 steps of size ``hs[i]``. :func:`integrate` records ``save(t, y)`` at the end of every segment as
 stacked scan outputs (simple; one extra field evaluation per sample). :func:`integrate_observed`
 (``simulate``) lets the field return an observation of the state it is evaluated at and hands the
 observations of segment starts, in blocks, to a ``write`` that puts them in place: with one step
-per segment they come from RK4's first stage at no extra cost. ``stage_loop=True`` evaluates the
-four stages in a loop (the field traced once; ``simulate`` uses it for derivatives only).
+per segment they come from the step's first stage at no extra cost. ``stage_loop=True`` evaluates
+the stages in a loop (the field traced once; ``simulate`` uses it for derivatives only).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 from jax import lax
+
+from .._base.linalg import lu_factor_lists, lu_solve_lists
 
 
 def rk4_step(f: Callable, t, y, h, args, *, observed: bool = False, stage_loop: bool = False):
@@ -73,15 +88,113 @@ def _stages_loop(g, t, y, h, args):
     return k1, k2, k3, k4, obs
 
 
+
+@dataclasses.dataclass(frozen=True)
+class RosenbrockTableau:
+    """A Rosenbrock method in the form of Hairer & Wanner (IV.7.25) that needs no products with
+    the Jacobian: stage ``i`` solves ``(I/(γh) − ∂f/∂y) U_i = f(t + α_i h, y + Σ_j a_ij U_j) +
+    Σ_j (c_ij/h) U_j + d_i h ∂f/∂t`` and ``y_next = y + Σ_i m_i U_i``."""
+
+    name: str
+    gamma: float
+    alpha: tuple[float, ...]
+    d: tuple[float, ...]
+    a: tuple[tuple[float, ...], ...]  # row i: a_i0 .. a_i,i-1
+    c: tuple[tuple[float, ...], ...]  # row i: c_i0 .. c_i,i-1
+    m: tuple[float, ...]
+
+
+_A5 = (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.6878860361058950)
+
+#: RODAS4 (Hairer & Wanner's ``rodas.f``, METH = 1): order 4, L-stable, stiffly accurate.
+RODAS4 = RosenbrockTableau(
+    name="rodas4",
+    gamma=0.25,
+    alpha=(0.0, 0.386, 0.21, 0.63, 1.0, 1.0),
+    d=(0.25, -0.1043, 0.1035, -0.3620000000000023e-01, 0.0, 0.0),
+    a=((), (1.544,), (0.9466785280815826, 0.2557011698983284),
+       (3.314825187068521, 2.896124015972201, 0.9986419139977817), _A5, _A5 + (1.0,)),
+    c=((), (-5.6688,), (-2.430093356833875, -0.2063599157091915),
+       (-0.1073529058151375, -9.594562251023355, -20.47028614809616),
+       (7.496443313967647, -10.24680431464352, -33.99990352819905, 11.70890893206160),
+       (8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054)),
+    m=_A5 + (1.0, 1.0),
+)
+
+#: Solver names accepted by ``simulate(..., solver=)``.
+SOLVERS = ("rk4", "rodas4")
+
+
+def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage_loop: bool = False,
+                    tableau: RosenbrockTableau = RODAS4):
+    """One Rosenbrock step of ``ẏ = f(t, y, args)`` for a component-leading array ``y`` (n, ...)
+    whose batch elements are independent (``f`` acts elementwise over the trailing axes, as the
+    fields of ``simulate`` do), with the exact Jacobian of ``f`` by forward-mode autodiff.
+
+    ``observed``/``stage_loop`` as :func:`rk4_step` (the observation is that of the linearisation
+    point ``(t, y)``).
+    """
+    g = f if observed else (lambda t_, y_, a_: (f(t_, y_, a_), None))
+    n = y.shape[0]
+    f0, lin, obs = jax.linearize(lambda t_, y_: g(t_, y_, args), t, y, has_aux=True)
+    # n Jacobian columns (unit tangents of every trajectory's component j) and ∂f/∂t, in one vmap.
+    eye = jnp.eye(n + 1, n, dtype=y.dtype).reshape((n + 1, n) + (1,) * (y.ndim - 1))
+    t_dir = jnp.zeros((n + 1,), jnp.result_type(t)).at[n].set(1.0)
+    cols = jax.vmap(lin)(t_dir, jnp.broadcast_to(eye, (n + 1,) + y.shape))
+    ft = cols[n]
+    inv_gh = 1.0 / (tableau.gamma * h)
+    lu = lu_factor_lists([[(inv_gh if i == j else 0.0) - cols[j][i] for j in range(n)] for i in range(n)])
+    solve = lambda rhs: jnp.stack(lu_solve_lists(lu, [rhs[i] for i in range(n)]))  # noqa: E731
+    s = len(tableau.alpha)
+    if stage_loop:
+        U = _rosenbrock_stages_loop(g, t, y, h, args, f0, ft, solve, tableau)
+    else:
+        U = []
+        for i in range(s):
+            fi = f0 if i == 0 else g(t + tableau.alpha[i] * h, y + sum(a * u for a, u in zip(tableau.a[i], U)), args)[0]
+            rhs = fi + tableau.d[i] * h * ft
+            for cij, u in zip(tableau.c[i], U):
+                rhs = rhs + (cij / h) * u
+            U.append(solve(rhs))
+    y_next = y + sum(mi * u for mi, u in zip(tableau.m, U))
+    return (y_next, obs) if observed else y_next
+
+
+def _rosenbrock_stages_loop(g, t, y, h, args, f0, ft, solve, tableau):
+    """The stage increments ``U_0 .. U_{s−1}`` with stages 1.. in a ``fori_loop`` (``g`` traced once)."""
+    s = len(tableau.alpha)
+    dt = y.dtype
+    lower = lambda rows: jnp.array([list(r) + [0.0] * (s - len(r)) for r in rows], dt)  # noqa: E731
+    A, C = lower(tableau.a), lower(tableau.c)
+    alpha, d = jnp.array(tableau.alpha, dt), jnp.array(tableau.d, dt)
+    U0 = jnp.zeros((s,) + y.shape, dt).at[0].set(solve(f0 + tableau.d[0] * h * ft))
+
+    def stage(i, U):
+        yi = y + jnp.tensordot(A[i], U, axes=1)
+        rhs = g(t + alpha[i] * h, yi, args)[0] + jnp.tensordot(C[i], U, axes=1) / h + d[i] * h * ft
+        return U.at[i].set(solve(rhs))
+
+    U = lax.fori_loop(1, s, stage, U0)
+    return [U[i] for i in range(s)]
+
+
+def step_function(solver: str) -> Callable:
+    """The one-step function of a solver name in :data:`SOLVERS`."""
+    return {"rk4": rk4_step, "rodas4": rosenbrock_step}[solver]
+
+
 def integrate(
-    f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, save: Callable, *, unroll: int = 1
+    f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, save: Callable, *, unroll: int = 1,
+    solver: str = "rk4",
 ):
     """Integrate ``ẏ = f(t, y, args)`` over consecutive segments and save at their ends.
 
     **Arguments:** ``t0s`` (S,) segment start times, ``hs`` (S,) step sizes, ``n_steps`` static
     steps per segment, ``save(t, y, args)`` -> pytree. **Returns:** ``(y_final, saved)`` with a
-    leading (S,) axis on every saved leaf.
+    leading (S,) axis on every saved leaf. ``solver``: one of :data:`SOLVERS` (``"rodas4"`` needs
+    a component-leading array ``y``).
     """
+    one_step = step_function(solver)
 
     def segment(y, seg):
         t0, h = seg
@@ -89,7 +202,7 @@ def integrate(
         # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
         @jax.checkpoint
         def step(y, i):
-            return rk4_step(f, t0 + i * h, y, h, args), None
+            return one_step(f, t0 + i * h, y, h, args), None
 
         y, _ = lax.scan(step, y, jnp.arange(n_steps, dtype=jnp.result_type(float)), unroll=unroll)
         return y, save(t0 + n_steps * h, y, args)
@@ -99,7 +212,7 @@ def integrate(
 
 def integrate_observed(
     f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, acc: Any, write: Callable | None, *,
-    block: int = 1, unroll: int = 1, stage_loop: bool = False,
+    block: int = 1, unroll: int = 1, stage_loop: bool = False, solver: str = "rk4",
 ):
     """Integrate ``ẏ = f(t, y, args)[0]`` over consecutive segments, observing their starts.
 
@@ -109,14 +222,16 @@ def integrate_observed(
     ``n_steps`` static steps per segment; ``write(acc, i, obs) -> acc`` receives the
     observations of the starts of segments ``i, ..., i + block − 1`` stacked on a leading
     ``(block,)`` axis (``block`` divides S); ``write=None`` observes nothing. With ``n_steps == 1``
-    an observation is RK4's first stage (free), otherwise one extra evaluation per segment.
+    an observation is the step's first stage (free), otherwise one extra evaluation per segment.
+    ``solver``: one of :data:`SOLVERS`.
     **Returns:** ``(y_final, acc)``.
 
     Keep ``write`` linear in ``obs`` (e.g. ``dynamic_update_slice`` into a buffer in ``acc``) so
     that reverse mode stores no per-segment copy of ``acc``.
     """
     # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
-    step = jax.checkpoint(lambda t, y, h: rk4_step(f, t, y, h, args, observed=True, stage_loop=stage_loop))
+    one_step = step_function(solver)
+    step = jax.checkpoint(lambda t, y, h: one_step(f, t, y, h, args, observed=True, stage_loop=stage_loop))
     observe = jax.checkpoint(lambda t, y: f(t, y, args)[1])
 
     def run_steps(y, t0, h):

@@ -21,7 +21,7 @@ from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
 from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax
 from .._chains.kinematics import manipulability_soa
-from .integrate import integrate_observed
+from .integrate import SOLVERS, integrate_observed
 from .models import _PMP
 from .planners import Planner
 from .redundancy import admittance_terms_soa
@@ -127,7 +127,8 @@ def _rates(model, q0, *, batch):
 
 
 def check_rk4_stability(model, planner, q0, batch, h):
-    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0.
+    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0
+    (``h=None``: only check that ``q0`` is not singular, for the L-stable solver).
 
     Concrete ``model``, ``q0`` inside a caller's ``jit``/``vmap``/``grad`` are evaluated eagerly
     (outside any trace no ``ensure_compile_time_eval``: it would compile each constant op apart)."""
@@ -138,6 +139,8 @@ def check_rk4_stability(model, planner, q0, batch, h):
     lam, g_null = (np.asarray(v) for v in rates)
     if np.any(lam[..., 0] <= 0):
         raise ValueError("`q0` is at a singular posture: J W⁻¹ Jᵀ is not positive definite")
+    if h is None:
+        return
     g = planner.max_gain()
     if getattr(planner, "task_velocity", False):
         rate = g
@@ -149,7 +152,7 @@ def check_rk4_stability(model, planner, q0, batch, h):
     if rate * h > 2.5:
         raise ValueError(
             f"`dt`={h:.3g} s is too large for RK4: the fastest time constant at q0 is "
-            f"{1 / rate:.3g} s (need dt < {2.5 / rate:.3g} s)"
+            f"{1 / rate:.3g} s (need dt < {2.5 / rate:.3g} s, or solver='rodas4', which is stable at any dt)"
         )
 
 
@@ -163,6 +166,7 @@ def simulate_sequence(
     dt: float = 1e-3,
     saveat: SaveAt | None = None,
     singular_tol: float = 1e-4,
+    solver: str = "rk4",
 ) -> Trajectory:
     """Simulate consecutive movements to ``targets`` (..., M, m), each lasting ``duration`` [s].
 
@@ -170,20 +174,35 @@ def simulate_sequence(
     Eq 10 gains recomputed at its start posture). ``q0`` (..., n) [rad]; leading axes of ``q0``,
     ``targets`` and of the model's and planner's parameters broadcast together as a batch.
     Returns a :class:`Trajectory` with leaves (..., M, S, ·). Differentiable with respect to every
-    array leaf and to ``q0``/``targets``; ``duration``, ``dt`` and ``saveat`` are static.
+    array leaf and to ``q0``/``targets``; ``duration``, ``dt``, ``saveat`` and ``solver`` are static.
 
-    Saved samples come from RK4's first stage (no extra field evaluations when saving every step)
-    and are written in place in the output layout, so saving costs about the memory it fills
+    ``solver``: ``"rk4"`` (classical RK4; refuses a ``dt`` outside its stability region) or
+    ``"rodas4"`` (L-stable Rosenbrock, order 4: for stiff movements, e.g. Eq 10's gain with
+    anisotropic ``KJ``, where it takes steps 10–100× larger than RK4 could; each step costs about
+    two RK4 steps). See ``pmpjax._pmp.integrate`` and ``benchmarks/stiff.py``. Stiff modes that
+    are already excited at ``t = 0`` (``q0`` far from its null-space equilibrium under light
+    damping) are damped at any ``dt`` but resolved only by a ``dt`` below their time constant.
+
+    Saved samples come from the step's first stage (no extra field evaluations when saving every
+    step) and are written in place in the output layout, so saving costs about the memory it fills
     (``benchmarks/simulate.py --saves``).
     """
-    return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False)
+    return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False, solver)
 
 
-def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, single):
+def check_solver(solver) -> str:
+    """``solver`` if it names one of :data:`SOLVERS`, else a ``ValueError`` naming the argument."""
+    if not isinstance(solver, str) or solver not in SOLVERS:
+        raise ValueError(f"`solver` must be one of {', '.join(map(repr, SOLVERS))}; got {solver!r}")
+    return solver
+
+
+def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, single, solver):
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     if not isinstance(planner, Planner):
         raise TypeError(f"`planner` must be a pmpjax Planner, got {type(planner).__name__}")
+    solver = check_solver(solver)
     chain = model.chain
     n, m = chain.n, chain.m
     q0 = to_jax(as_array("q0", q0, tail=(n,)), float)
@@ -196,11 +215,11 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
     if is_concrete(model, planner, q0):
-        check_rk4_stability(model, planner, q0, batch, max(sched.hs))
+        check_rk4_stability(model, planner, q0, batch, max(sched.hs) if solver == "rk4" else None)
     # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.
     h = sched.hs[0] if len(set(sched.hs)) == 1 else None
     kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
-                     singular_tol=float(singular_tol), single=single)
+                     singular_tol=float(singular_tol), single=single, solver=solver)
     out = kernel(model, planner, q0, targets, np.asarray(sched.t0s), np.asarray(sched.hs))
     return replace(out, t=to_jax(np.asarray(sched.t)))
 
@@ -286,12 +305,9 @@ _FOLD_TANGENTS = contextvars.ContextVar("pmpjax_fold_tangents", default=False)
 @contextlib.contextmanager
 def forward_jacobians():
     """Trace forward-mode Jacobians (``jax.jacfwd``, also under ``jax.vmap``) through ``simulate``
-    with the tangent and mapped axes folded into the run's own batch (``_kernel_jvp``).
-
-    Plain ``vmap`` of the JVP batches the nested RK4 scans (each ``vmap`` level retraces them to
-    a fixed point), which dominates tracing and compile time of fits with Jacobians through
-    ``simulate``. Folded, one JVP of the kernel runs at the product batch (the primal is repeated
-    per tangent: cheap for the few parameters of a fit). The result is forward-mode only (no
+    with ``_kernel_jvp``'s batching rule: ``jax.jacfwd``'s tangents are batched with the primal
+    computed once; a mapped axis of primals and tangents alike (a caller's ``vmap`` of the JVP) is
+    folded into the run's own (trailing, contiguous) batch. The result is forward-mode only (no
     ``grad`` or second derivatives of what is traced inside); ``fitting.least_squares`` uses it
     for its Jacobians."""
     token = _FOLD_TANGENTS.set(True)
@@ -314,6 +330,15 @@ def _kernel_jvp(**statics):
     def _rule(axis_size, in_batched, primals, tangents):
         pb, tb = in_batched
         plain = any(jax.tree_util.tree_leaves((pb[0].chain, pb[4:], tb[0].chain, tb[4:])))
+        flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
+        if not plain and not any(jax.tree_util.tree_leaves(pb)):
+            # Unmapped primals (jax.jacfwd's basis vmap): plain vmap of the JVP computes the primal
+            # once and batches the tangents only (folding repeated the primal per tangent: the
+            # reaching fit's Jacobian 1.6x slower with RODAS4, 1.9x with RK4; benchmarks/stiff.py).
+            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb))
+            oax = jax.tree_util.tree_map(lambda f: 0 if f else None, flags)
+            out = jax.vmap(lambda p, t: jax.jvp(run_jvp, p, t), in_axes=axes, out_axes=(None, oax))(primals, tangents)
+            return out, (jax.tree_util.tree_map(lambda _: False, flags), flags)
         if plain:  # a mapped chain or time grid: plain vmap of the JVP
             axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb))
             out = jax.vmap(lambda p, t: jax.jvp(run_jvp, p, t), in_axes=axes)(primals, tangents)
@@ -348,13 +373,7 @@ def _kernel_jvp(**statics):
         tgp, tgt = pair(tgp, tgt, pb[3], tb[3], 2)
         out = _kernel_jvp(**{**statics, "batch": (axis_size,) + batch})(
             (mp, plp, q0p, tgp, t0p, hp), (mt, plt, q0t, tgt, t0t, ht))
-        flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
-        if any(jax.tree_util.tree_leaves(pb)):
-            return out, (flags, flags)
-        # Unmapped primals (e.g. jax.jacfwd's basis vmap): the primal is the same in every lane.
-        primal = replace(out[0], **{k: getattr(out[0], k)[0] for k in ("q", "x", "qdot", "xdot", "manipulability",
-                                                                        "status")})
-        return (primal, out[1]), (jax.tree_util.tree_map(lambda _: False, flags), flags)
+        return out, (flags, flags)
 
     return jvp
 
@@ -383,7 +402,7 @@ def _vmap_rule(statics, axis_size, in_batched, args):
     return out, Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
 
 
-def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4):
+def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4, solver="rk4"):
     """Simulate one movement (per batch element) from ``q0`` (..., n) to ``target`` (..., m).
 
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
@@ -399,7 +418,7 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
     return _simulate(model, planner, q0, on_host(target, lambda a: a[..., None, :]), duration, dt, saveat,
-                     singular_tol, True)
+                     singular_tol, True, solver)
 
 
 #: Most consecutive samples written to the trajectory-major outputs at once: one sample per
@@ -407,11 +426,11 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
 _BLOCK = 16
 
 
-_RUN_STATICS = ("h", "batch", "n_steps", "include_initial", "singular_tol", "single", "stage_loop")
+_RUN_STATICS = ("h", "batch", "n_steps", "include_initial", "singular_tol", "single", "stage_loop", "solver")
 
 
 def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-               single, stage_loop=False):
+               single, stage_loop=False, solver="rk4"):
     """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
     chain = model.chain
     n, m = chain.n, chain.m
@@ -459,10 +478,10 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
             qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
-                                             stage_loop=stage_loop)
+                                         stage_loop=stage_loop, solver=solver)
         else:
             qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
-                                             stage_loop=stage_loop)
+                                         stage_loop=stage_loop, solver=solver)
         obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
         return (qc, acc), None

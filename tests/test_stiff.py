@@ -1,0 +1,204 @@
+"""The L-stable solver (``simulate(..., solver="rodas4")``) on stiff λ0-PMP movements.
+
+References, independent of pmpjax: SciPy ``solve_ivp`` (Radau, rtol 1e-10) of NumPy right-hand
+sides written from design §3.1 and Eqs 7–10 (tests/_reference.py), NumPy's LAPACK solve, and
+central differences. Stiff means Eq 10's gain with anisotropic ``KJ`` (cond up to 1e4), where
+RK4 at the same step is refused (or diverges); the solver must stay within 0.01° of Radau at
+≤ 5 steps per sample.
+
+Compile budget: one arm batch (Arimoto, two stiffnesses), one arm time-base-generator movement,
+one wrist batch at two step sizes, one gradient problem.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _reference import arimoto, arm4_fk, arm4_jac, central_diff, pmp_field, pmp_qdot, wrist_jac
+from scipy.integrate import solve_ivp
+
+import pmpjax as pj
+from pmpjax._base.linalg import lu_factor_lists, lu_solve_lists
+
+SAMPLES = 50
+TS = tuple(np.linspace(0.0, 1.0, SAMPLES))
+RADAU = dict(method="Radau", rtol=1e-10, atol=1e-12)
+
+
+def spd_with_cond(rng, n, cond, trace=4.0):
+    """A random SPD matrix with the given condition number and trace."""
+    Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    ev = np.geomspace(1.0, cond, n)
+    return Q @ np.diag(trace * ev / ev.sum()) @ Q.T
+
+
+def eq10_gain(J0, W, tau0):
+    """``k = b_max / τ0`` with ``b_max`` the largest eigenvalue of ``B(q0) = (J W⁻¹ Jᵀ)⁻¹``."""
+    return 1.0 / (np.linalg.eigvalsh(J0 @ np.linalg.inv(W) @ J0.T)[0] * tau0)
+
+
+def minjerk_gain(t, T, cap):
+    """Time-base generator: ``γ = ξ̇/(1 − ξ)`` of the minimum-jerk profile, capped at ``cap``."""
+    s = min(t / T, 1.0)
+    xi = 10 * s**3 - 15 * s**4 + 6 * s**5
+    dxi = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
+    return cap if s >= 1.0 else min(dxi / max(1.0 - xi, 1e-12), cap)
+
+
+def arm_radau(q0, x_d, KJ, q_rest, W, force, T=1.0):
+    fk_jac = lambda q: (arm4_fk(q), arm4_jac(q))  # noqa: E731
+
+    def rhs(t, q):
+        x, J = fk_jac(q)
+        return pmp_field(q, force(t, x, J), fk_jac, KJ, q_rest, W, "lambda0")
+
+    sol = solve_ivp(rhs, (0.0, T), q0, t_eval=np.asarray(TS) * T, **RADAU)
+    assert sol.success
+    return sol.y.T
+
+
+ARM_Q0 = np.deg2rad([-20.0, -30.0, 0.0, 80.0])
+ARM_TARGET = arm4_fk(np.deg2rad([-40.0, -60.0, -20.0, 50.0]))
+ARM_REST = np.deg2rad([-30.0, -40.0, -10.0, 60.0])
+
+
+@pytest.fixture(scope="module")
+def arm_case():
+    """Two stiff arm movements (cond KJ = 1e3, 1e4), W = τ0 KJ, Arimoto with Eq 10's gain."""
+    rng = np.random.default_rng(1)
+    KJ = np.stack([spd_with_cond(rng, 4, c) for c in (1e3, 1e4)])
+    tau0 = tau = 0.2
+    W = tau0 * KJ
+    refs = []
+    for K, Wi in zip(KJ, W):
+        k = eq10_gain(arm4_jac(ARM_Q0), Wi, tau0)
+        g = arimoto(k, tau)
+        refs.append(arm_radau(ARM_Q0, ARM_TARGET, K, ARM_REST, Wi, lambda t, x, J, g=g: g(t) * (ARM_TARGET - x)))
+    model = pj.Lambda0PMP(pj.ShoulderElbowArm(), KJ=KJ, q_rest=ARM_REST, W=W)
+    planner = pj.ArimotoPlanner(k=None, tau=tau, tau0=tau0)
+    return model, planner, np.stack(refs)
+
+
+def test_rodas4_matches_radau_on_stiff_arm_movements(arm_case):
+    model, planner, ref = arm_case
+    kw = dict(duration=1.0, dt=1.0 / ((SAMPLES - 1) * 5), saveat=pj.SaveAt(ts=TS))
+    tr = pj.simulate(model, planner, ARM_Q0, ARM_TARGET, solver="rodas4", **kw)
+    assert np.all(np.asarray(tr.status) == 0)
+    err = np.rad2deg(np.abs(np.asarray(tr.q) - ref)).max(axis=(1, 2))
+    assert np.all(err <= 0.01), err
+    # the same step is far outside RK4's stability region: refused, with the way out named
+    with pytest.raises(ValueError, match="too large for RK4.*rodas4"):
+        pj.simulate(model, planner, ARM_Q0, ARM_TARGET, solver="rk4", **kw)
+
+
+def test_rodas4_matches_radau_with_the_time_base_generator():
+    # Stiff at the end: γ = ξ̇/(1 − ξ) grows without bound as the hand arrives, up to its cap
+    # (2000 /s here: RK4 needs dt < 1.25 ms); cond KJ = 1e4, W = τ0 KJ.
+    rng = np.random.default_rng(2)
+    KJ = spd_with_cond(rng, 4, 1e4)
+    W = 0.2 * KJ
+    T, cap = 1.0, 2000.0
+
+    def force(t, x, J):  # F = γ B (x_d − x), so that ẋ = γ (x_d − x)
+        B = np.linalg.inv(J @ np.linalg.inv(W) @ J.T)
+        return minjerk_gain(t, T, cap) * B @ (ARM_TARGET - x)
+
+    ref = arm_radau(ARM_Q0, ARM_TARGET, KJ, ARM_REST, W, force)
+    model = pj.Lambda0PMP(pj.ShoulderElbowArm(), KJ=KJ, q_rest=ARM_REST, W=W)
+    planner = pj.MinimumJerkPlanner(duration=T, gain_cap=cap)
+    kw = dict(duration=T, dt=T / ((SAMPLES - 1) * 5), saveat=pj.SaveAt(ts=TS))
+    tr = pj.simulate(model, planner, ARM_Q0, ARM_TARGET, solver="rodas4", **kw)
+    assert int(tr.status) == 0
+    assert np.rad2deg(np.abs(np.asarray(tr.q) - ref)).max() <= 0.01
+    with pytest.raises(ValueError, match="too large for RK4"):
+        pj.simulate(model, planner, ARM_Q0, ARM_TARGET, solver="rk4", **kw)
+
+
+def test_rodas4_on_stiff_wrist_movements_is_fourth_order():
+    # Wrist (Eq 6), Figure 3's duration, Eq 10's gain at cond KJ = 1e4, and the Figure 3 model:
+    # within 0.01° of Radau at 5 steps per sample; halving the step divides the error by ~2⁴.
+    rng = np.random.default_rng(3)
+    KJ = np.stack([spd_with_cond(rng, 3, 1e4), np.diag([0.5, 1.5, 2.0])])
+    q_rest = np.deg2rad([5.0, 0.0, 0.0])
+    T, tau0 = 0.4, 0.08
+    q0, x_d = np.zeros(3), np.array([0.15, 0.2])
+    ts = np.asarray(TS) * T
+    refs = []
+    for K in KJ:
+        W = tau0 * K
+        g = arimoto(eq10_gain(wrist_jac(q0), W, tau0), tau0)
+        sol = solve_ivp(lambda t, q, K=K, W=W, g=g: pmp_qdot(q, t, x_d, K, q_rest, W, g), (0.0, T), q0,
+                        t_eval=ts, **RADAU)
+        refs.append(sol.y.T)
+    refs = np.stack(refs)
+    model = pj.Lambda0PMP(pj.Wrist(), KJ=KJ, q_rest=q_rest, W=tau0 * KJ)
+    planner = pj.ArimotoPlanner(k=None, tau=tau0, tau0=tau0)
+    errs = []
+    for steps in (2, 4):
+        tr = pj.simulate(model, planner, q0, x_d, duration=T, dt=T / ((SAMPLES - 1) * steps),
+                         saveat=pj.SaveAt(ts=tuple(ts)), solver="rodas4")
+        errs.append(np.rad2deg(np.abs(np.asarray(tr.q) - refs)).max(axis=(1, 2)))
+    assert np.all(errs[1] <= 0.01), errs
+    assert 10 < errs[0][1] / errs[1][1] < 25  # the smooth Figure 3 movement: fourth order (16)
+
+
+def _grad_problem():
+    chain = pj.Wrist()
+    q0 = np.zeros(3)
+    targets = np.array([[0.15, 0.2], [-0.2, 0.05]])
+    K0 = np.array([[1.2, 0.3, 0.0], [0.3, 0.4, 0.1], [0.0, 0.1, 2.4]])
+    q_rest = np.deg2rad([5.0, -3.0, 2.0])
+
+    def loss(v):
+        """A scalar of the trajectories: v = (3 KJ diagonal scalings, log τ0)."""
+        KJ = K0 * jnp.exp(v[:3])[:, None] * jnp.exp(v[:3])[None, :]
+        tau0 = jnp.exp(v[3])
+        model = pj.Lambda0PMP(chain, KJ=KJ, q_rest=q_rest, W=tau0 * KJ)
+        planner = pj.ArimotoPlanner(k=None, tau=0.08, tau0=tau0)
+        tr = pj.simulate(model, planner, q0, targets, duration=0.4, dt=0.01, saveat=pj.SaveAt(every=5),
+                         solver="rodas4")
+        return jnp.sum(jnp.sin(3.0 * tr.q)) + jnp.sum(tr.x**2)
+
+    return loss, np.array([0.1, -0.2, 0.05, np.log(0.08)])
+
+
+def test_rodas4_gradients_match_central_differences():
+    loss, v = _grad_problem()
+    f = pj.fast_compile_jit(loss)
+    fd = central_diff(lambda u: f(jnp.asarray(u)), v)
+    g_rev = np.asarray(pj.fast_compile_jit(jax.grad(loss))(jnp.asarray(v)))
+    g_fwd = np.asarray(pj.fast_compile_jit(jax.jacfwd(loss))(jnp.asarray(v)))
+    scale = np.abs(fd).max()
+    assert np.allclose(g_rev, fd, atol=1e-6 * scale), (g_rev, fd)
+    assert np.allclose(g_fwd, g_rev, atol=1e-12 * scale)
+
+
+def test_rodas4_batch_equals_single_calls(arm_case):
+    model, planner, _ = arm_case
+    kw = dict(duration=1.0, dt=1.0 / ((SAMPLES - 1) * 5), saveat=pj.SaveAt(ts=TS), solver="rodas4")
+    batch = pj.simulate(model, planner, ARM_Q0, ARM_TARGET, **kw)
+    for i in range(2):
+        one = pj.simulate(pj.Lambda0PMP(model.chain, KJ=model.KJ[i], q_rest=model.q_rest, W=model.W[i]),
+                          planner, ARM_Q0, ARM_TARGET, **kw)
+        np.testing.assert_allclose(np.asarray(one.q), np.asarray(batch.q)[i], rtol=0, atol=1e-12)
+
+
+@pytest.mark.bad_input("pj.simulate", "pj.simulate_sequence")
+def test_unknown_solver_is_refused_by_name():
+    model = pj.Lambda0PMP(pj.Wrist(), KJ=np.eye(3), q_rest=np.zeros(3), W=0.1 * np.eye(3))
+    for bad in ("radau", None, 4):
+        with pytest.raises(ValueError, match="`solver`"):
+            pj.simulate(model, pj.ConstantPlanner(5.0), np.zeros(3), np.array([0.1, 0.0]), duration=0.1,
+                        solver=bad)
+
+
+def test_pivoted_lu_matches_lapack(rng):
+    # the per-trajectory linear solves of every RODAS4 step: leading pivots of zero need pivoting
+    for m in (2, 3, 4, 5):
+        A = rng.normal(size=(m, m, 9))
+        A[0, 0, :4] = 0.0
+        b = rng.normal(size=(m, 9))
+        lu = lu_factor_lists([[jnp.asarray(A[i, j]) for j in range(m)] for i in range(m)])
+        x = np.stack(lu_solve_lists(lu, [jnp.asarray(b[i]) for i in range(m)]))
+        ref = np.stack([np.linalg.solve(A[..., k], b[:, k]) for k in range(9)], -1)
+        np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-12)
