@@ -57,6 +57,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.integrate  # noqa: E402
+import scipy.interpolate  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -123,15 +124,19 @@ def _residual_np(theta, d, KJ, q_rest, opts):
         xs = np.stack([np.convolve(pad(x, True)[:, i], w, "valid") for i in range(2)], 1)
         vs = np.stack([np.convolve(pad(xdot, False)[:, i], w, "valid") for i in range(2)], 1)
         v = np.linalg.norm(vs, axis=1)
+        # speed on its C¹ (Catmull–Rom) interpolant in normalised time: peak, 20 % crossings, samples
+        s_grid = np.arange(len(v)) * h
+        spl = scipy.interpolate.CubicHermiteSpline(s_grid, v, np.gradient(v, h, edge_order=1))
         i = int(np.argmax(v))
-        level = opts["threshold"] * v[i]
-        on = np.flatnonzero(v[:i] < level)[-1]
-        off = i + np.flatnonzero(v[i:] < level)[0]
-        s_on = (on + (level - v[on]) / (v[on + 1] - v[on])) * h - d["half"][m]
-        s_off = (off - 1 + (v[off - 1] - level) / (v[off - 1] - v[off])) * h + d["half"][m]
+        crit = spl.derivative().roots()
+        crit = crit[(crit >= s_grid[i - 1]) & (crit <= s_grid[i + 1])]
+        level = opts["threshold"] * max(v[i], *(spl(crit) if crit.size else [v[i]]))
+        roots = spl.solve(level, extrapolate=False)
+        s_on = roots[roots < s_grid[i]].max() - d["half"][m]
+        s_off = roots[roots > s_grid[i]].min() + d["half"][m]
         sq = np.linspace(s_on, s_off, opts["n_samples"]) * T
         path = np.stack([np.interp(sq, t, xs[:, c]) for c in range(2)], 1)
-        speed = np.interp(sq, t, v)
+        speed = spl(sq / T)
         peak = d["mean_speed"][m].max()
         out += [((path - d["mean_path"][m]) / opts["radius"]).ravel(), (speed - d["mean_speed"][m]) / peak,
                 [((s_off - s_on) - 1.0) * np.sqrt(opts["n_samples"])]]

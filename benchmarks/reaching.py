@@ -129,7 +129,6 @@ Findings (from these runs):
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -143,16 +142,16 @@ import scipy.integrate  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
+import _baselines as bl  # noqa: E402
 from _baselines import write_results  # noqa: E402
 
 import fitting  # noqa: E402
 from fitting import _reaching as R  # noqa: E402
 
 SUBJECTS = (1, 2, 3, 4)
-VARIANTS = (("lambda0", "tau0_KJ", "tied"), ("lambda0", "full", "tied"), ("lambda0", "diagonal", "tied"))
-VARIANT_NAMES = {f"{m}/{d}/{t}": (m, d, t) for m, d, t in VARIANTS + (
-    ("lambda0", "tau0_KJ", "fitted"), ("lambda0", "diagonal", "fitted"), ("lambda0", "full", "fitted"))}
-FITTED = (("lambda0", "tau0_KJ", "fitted"), ("lambda0", "diagonal", "fitted"), ("lambda0", "full", "fitted"))
+#: Every λ0-PMP variant of fitting.fit_reaching: planner × damping × time constants.
+VARIANTS = tuple((m, d, t) for m in R.MODELS for t in R.TIME_CONSTANTS for d in R.DAMPINGS)
+VARIANT_NAMES = {f"{m}/{d}/{t}": (m, d, t) for m, d, t in VARIANTS}
 
 
 def load():
@@ -277,6 +276,7 @@ def timed_fit(subjects, **kw):
     return fit, wall, comp
 
 
+
 # --- the held-out table --------------------------------------------------------------------------
 
 
@@ -287,46 +287,64 @@ def _stats(v):
                 median=float(np.median(ok)) if ok.size else None, mean=float(np.mean(ok)) if ok.size else None)
 
 
+def _groups(pred):
+    return [*dict.fromkeys(pred.subject.tolist()), "all"]
+
+
+def _select(pred, s):
+    return np.ones(len(pred.task), bool) if s == "all" else pred.subject == s
+
+
 def predictor_rows(pred, name):
     """Per subject (and "all"): held-out final error and RMSE statistics of one predictor."""
     b = pred.predictors()[name]
-    out = {}
-    for s in [*dict.fromkeys(pred.subject.tolist()), "all"]:
-        sel = np.ones(len(pred.task), bool) if s == "all" else pred.subject == s
-        out[s] = dict(final=_stats(b.final_error_deg[sel]), rmse=_stats(b.rmse_deg[sel]))
-    return out
+    return {s: dict(final=_stats(b.final_error_deg[_select(pred, s)]), rmse=_stats(b.rmse_deg[_select(pred, s)]))
+            for s in _groups(pred)}
 
 
 def fit_rows(fit, wall, comp):
     return dict(
-        wall_s=wall, compile_s=comp, run_s=wall - comp, load=load(), steps_per_sample=fit.steps_per_sample,
-        n_params=len(fit.param_names),
+        wall_s=wall, compile_s=comp, run_s=wall - comp, load=load(), solver=fit.solver,
+        steps_per_sample=fit.steps_per_sample, n_params=len(fit.param_names),
         subjects={s: dict(status=int(fit.status[a]), message=fit.messages[a], n_motions=int(fit.n_motions[a]),
                           n_residuals=int(fit.n_residuals[a]), lm_steps=fit.lm_steps[a].tolist(),
                           loss=float(fit.loss[a]), train_rmse_deg=float(fit.rmse_deg[a]), aic=float(fit.aic[a]),
                           bic=float(fit.bic[a]), tau_over_T=float(fit.tau_over_T[a]),
-                          tau0_over_T=float(fit.tau0_over_T[a]), KJ=np.round(fit.KJ[a], 4).tolist(),
-                          W=np.round(fit.W[a], 4).tolist(),
+                          tau0_over_T=float(fit.tau0_over_T[a]),
+                          duration_over_T_rec=float(fit.duration_over_T_rec[a]),
+                          integration_error_deg=float(fit.integration_error_deg[a]),
+                          stiffness_cond=float(fit.stiffness_cond[a]), bound_active=fit.bound_active[a].tolist(),
+                          KJ=np.round(fit.KJ[a], 4).tolist(), W=np.round(fit.W[a], 4).tolist(),
                           q_rest_deg=np.round(np.rad2deg(fit.q_rest[a]), 2).tolist())
                   for a, s in enumerate(fit.subjects)})
 
 
-def wilcoxon(pred_a, pred_b):
-    """Paired two-sided Wilcoxon test of the held-out RMSE, per subject and pooled: b − a."""
+def wilcoxon(rows, a, b):
+    """Paired two-sided Wilcoxon test of the held-out RMSE of predictors ``rows[a]`` and ``rows[b]``
+    (the same held-out motions), per subject and pooled: b − a; ``b_better_fraction`` of the motions."""
     from scipy.stats import wilcoxon as w
 
+    ra, rb = rows[a], rows[b]
+    assert np.array_equal(ra._pred.rep, rb._pred.rep) and np.array_equal(ra._pred.index, rb._pred.index)
     out = {}
-    for s in [*dict.fromkeys(pred_a.subject.tolist()), "all"]:
-        sel = np.ones(len(pred_a.task), bool) if s == "all" else pred_a.subject == s
-        a, b = pred_a.rmse_deg[sel], pred_b.rmse_deg[sel]
-        ok = np.isfinite(a) & np.isfinite(b)
+    for s in _groups(ra._pred):
+        sel = _select(ra._pred, s)
+        x, y = ra.rmse_deg[sel], rb.rmse_deg[sel]
+        ok = np.isfinite(x) & np.isfinite(y)
         if ok.sum() < 5:
             out[s] = None
             continue
-        d = b[ok] - a[ok]
-        out[s] = dict(n=int(ok.sum()), median_diff_deg=float(np.median(d)), p=float(w(a[ok], b[ok]).pvalue),
+        d = y[ok] - x[ok]
+        out[s] = dict(n=int(ok.sum()), median_diff_deg=float(np.median(d)), p=float(w(x[ok], y[ok]).pvalue),
                       b_better_fraction=float(np.mean(d < 0)))
     return out
+
+
+class _Rows:
+    """One predictor's held-out rows (``rmse_deg``), with the prediction it came from."""
+
+    def __init__(self, pred, name):
+        self._pred, self.rmse_deg = pred, pred.predictors()[name].rmse_deg
 
 
 def _cell(st):
@@ -338,18 +356,19 @@ def markdown(res) -> str:
     subs = res["subjects"] + ["all"]
     names = list(res["predictors"])
     lines = []
-    for metric, title in (("final", "final-posture error"), ("rmse", "joint-trajectory RMSE")):
+    for metric, title in (("rmse", "joint-trajectory RMSE"), ("final", "final-posture error")):
         lines += [f"Held-out (repetitions 8–10) {title} [deg], median / mean over motions:", "",
                   "| predictor | " + " | ".join(subs) + " |", "|---|" + "---:|" * len(subs)]
         for n in names:
             lines.append(f"| {n} | " + " | ".join(_cell(res["predictors"][n][s][metric]) for s in subs) + " |")
         lines.append("")
-    n_held = {s: res["predictors"][names[0]][s]["rmse"]["n"] + res["predictors"][names[0]][s]["rmse"]["n_failed"]
-              for s in subs}
-    lines += ["Held-out motions: " + ", ".join(f"{s} {n_held[s]}" for s in subs), ""]
-    lines += ["Fits (repetitions 1–7): parameters p, training loss ½Σr², AIC / BIC (lower is better), "
-              "LM iterations (stage 1, stage 2), status:", "",
-              "| variant | p | " + " | ".join(res["subjects"]) + " |", "|---|---:|" + "---|" * len(res["subjects"])]
+    n0 = res["predictors"][names[0]]
+    lines += ["Held-out motions: " + ", ".join(f"{s} {n0[s]['rmse']['n'] + n0[s]['rmse']['n_failed']}"
+                                               for s in subs), ""]
+    lines += ["Fits (repetitions 1–7): parameters p, solver × steps per sample, training loss ½Σr², AIC, "
+              "LM iterations (stage 1, stage 2), status, bounds that bind (cond KJ, q_rest 1–3), wall time:", "",
+              "| variant | p | integration | " + " | ".join(res["subjects"]) + " | wall [s] |",
+              "|---|---:|---|" + "---|" * len(res["subjects"]) + "---:|"]
     for v, f in res["fits"].items():
         cells = []
         for s in res["subjects"]:
@@ -357,81 +376,97 @@ def markdown(res) -> str:
             if e is None:
                 cells.append("—")
                 continue
-            cells.append(f"{e['loss']:.4g}; {e['aic']:.0f} / {e['bic']:.0f}; {e['lm_steps'][0]},{e['lm_steps'][1]}"
-                         + ("" if e["status"] == 0 else f"; {e['message'].split(':')[0]}"))
-        lines.append(f"| {v} | {f['n_params']} | " + " | ".join(cells) + " |")
+            bound = "".join(k for k, b in zip(("K", "1", "2", "3"), e["bound_active"]) if b)
+            cells.append(f"{e['loss']:.4g}; {e['aic']:.0f}; {e['lm_steps'][0]},{e['lm_steps'][1]}; "
+                         + e["message"].split(":")[0] + (f"; bound {bound}" if bound else ""))
+        lines.append(f"| {v} | {f['n_params']} | {f['solver']} ×{f['steps_per_sample']} | " + " | ".join(cells)
+                     + f" | {f['wall_s']:.0f} |")
     lines.append("")
     if res.get("wilcoxon"):
-        lines += ["Free W against W = τ0 KJ, held-out RMSE, paired Wilcoxon (median difference [deg], p, "
-                  "fraction of motions where free W is better):", "",
-                  "| comparison | " + " | ".join(subs) + " |", "|---|" + "---|" * len(subs)]
+        lines += ["Paired Wilcoxon tests of held-out RMSE (median of b − a [deg], p, share of motions where "
+                  "b is better):", "", "| b vs a | " + " | ".join(subs) + " |", "|---|" + "---|" * len(subs)]
         for k, w in res["wilcoxon"].items():
-            lines.append(f"| {k} | " + " | ".join("—" if w[s] is None else
+            lines.append(f"| {k} | " + " | ".join("—" if w.get(s) is None else
                                                   f"{w[s]['median_diff_deg']:+.2f}, p={w[s]['p']:.2g}, "
                                                   f"{w[s]['b_better_fraction']:.0%}" for s in subs) + " |")
         lines.append("")
+    if res.get("verdict"):
+        lines += [res["verdict"], ""]
     return "\n".join(lines)
 
 
+def verdict(res) -> str:
+    """Which λ0-PMP variants beat ``pinv_minjerk`` on pooled held-out RMSE (paired test, p < 0.05)."""
+    wins, losses = [], []
+    for k, w in res["wilcoxon"].items():
+        b, a = k.split(" vs ")
+        if a != "pinv_minjerk" or w.get("all") is None:
+            continue
+        (wins if w["all"]["median_diff_deg"] < 0 and w["all"]["p"] < 0.05 else losses).append(
+            f"{b} ({w['all']['median_diff_deg']:+.2f}°, p = {w['all']['p']:.2g})")
+    if wins:
+        return ("**Verdict:** λ0-PMP variants that beat the pseudo-inverse minimum-jerk baseline on held-out "
+                "trajectories (pooled, paired): " + "; ".join(wins) + ". The others do not: " + "; ".join(losses) + ".")
+    return ("**Verdict:** no λ0-PMP variant beats the pseudo-inverse minimum-jerk baseline on held-out joint "
+            "trajectories (pooled, paired; median RMSE difference and p): " + "; ".join(losses) + ".")
+
+
 def table(args):
-    variants = (VARIANTS + (FITTED if args.fitted else ()))[: args.n_variants]
-    if args.variants:
-        variants = tuple(VARIANT_NAMES[v] for v in args.variants)
-    kw = dict(max_steps=tuple(args.max_steps))
+    import pickle
+
+    variants = tuple(VARIANT_NAMES[v] for v in args.variants) if args.variants else VARIANTS
+    kw = dict(max_steps=tuple(args.max_steps)) if args.max_steps else {}
     subjects = tuple(args.subjects)
     if args.quick:
         subjects, kw = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2))
         variants = variants[:2]
-    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(),
-               machine="2-core AMD EPYC Zen 4 KVM, no GPU", options={k: list(v) for k, v in kw.items()},
-               subjects=[f"S{s:02d}" for s in subjects], fits={}, predictors={}, wilcoxon={})
-    preds = {}
+    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(), machine=bl.machine(),
+               options={k: list(v) for k, v in kw.items()}, subjects=[f"S{s:02d}" for s in subjects], fits={},
+               predictors={}, wilcoxon={})
+    base = None if args.quick else write_results(args.name, res).removesuffix(".json")
+    rows = {}
+
+    def save():
+        order = list(res["predictors"])
+        res["predictors"] = {k: res["predictors"][k]
+                             for k in sorted(order, key=lambda k: (k in R.BASELINES, order.index(k)))}
+        res["load_end"] = load()
+        res["verdict"] = verdict(res)
+        if base:
+            write_results(args.name, res)
+            with open(base + ".md", "w") as f:
+                f.write(markdown(res) + "\n")
+
+    # the Donders-only model (final postures, stage 1 only): the reference of every variant
+    log("fit donders_only (stage 1 only) ...")
+    don, wall, comp = timed_fit(subjects, **{**kw, "max_steps": (kw.get("max_steps", (40, 100))[0], 0)})
+    pred = fitting.predict_reaching(don, reps=(8, 9, 10))
+    res["fits"]["donders_only"] = fit_rows(don, wall, comp)
+    res["predictors"]["donders_only"] = predictor_rows(pred, "model")
+    rows["donders_only"] = _Rows(pred, "model")
+    for b in R.BASELINES:
+        res["predictors"][b] = predictor_rows(pred, b)
+        rows[b] = _Rows(pred, b)
+    save()
     for model, damping, tc in variants:
         key = f"{model}/{damping}/{tc}"
         log(f"fit {key} ...")
         fit, wall, comp = timed_fit(subjects, model=model, damping=damping, time_constants=tc, **kw)
-        if not args.quick:
-            import pickle
-
-            with open(write_results(args.name, res).removesuffix(".json") + f"_{damping}_{tc}.pkl", "wb") as f:
-                pickle.dump(fit, f)
         res["fits"][key] = fit_rows(fit, wall, comp)
-        log(f"  fit {key}: {wall:.0f} s (compile {comp:.0f} s), status {fit.status.tolist()}, "
-            f"lm {fit.lm_steps.tolist()}, steps/sample {fit.steps_per_sample}, aic {np.round(fit.aic, 0).tolist()}")
+        log(f"  {wall:.0f} s (compile {comp:.0f} s), status {fit.status.tolist()}, lm {fit.lm_steps.tolist()}, "
+            f"{fit.solver} x{fit.steps_per_sample}, integration {np.round(fit.integration_error_deg, 4).tolist()}")
         t = time.perf_counter()
         pred = fitting.predict_reaching(fit, reps=(8, 9, 10))
         res["fits"][key]["predict_s"] = time.perf_counter() - t
-        if not args.quick:
-            import pickle
-
-            with open(write_results(args.name, res).removesuffix(".json") + f"_{damping}_{tc}_pred.pkl", "wb") as f:
-                pickle.dump(pred, f)
-        preds[key] = pred
+        if base:
+            with open(base + f"_{model}_{damping}_{tc}.pkl", "wb") as f:
+                pickle.dump((fit, pred), f)
         res["predictors"][key] = predictor_rows(pred, "model")
-        if key == "lambda0/tau0_KJ/tied" and not args.no_scipy:
-            try:
-                scipy_compare(args, fit, wall, comp, subjects, kw)
-            except Exception:  # the table goes on
-                import traceback
-
-                traceback.print_exc()
-        if len(preds) == 1:
-            for b in R.BASELINES:
-                res["predictors"][b] = predictor_rows(pred, b)
-        ref = f"{model}/tau0_KJ/{tc}"
-        if damping != "tau0_KJ" and ref in preds:
-            res["wilcoxon"][f"{damping} vs tau0_KJ ({tc})"] = wilcoxon(preds[ref], pred)
+        rows[key] = _Rows(pred, "model")
+        for ref in ("pinv_minjerk", "donders_only"):
+            res["wilcoxon"][f"{key} vs {ref}"] = wilcoxon(rows, ref, key)
         log(f"  held-out RMSE all: {res['predictors'][key]['all']['rmse']}")
-        # baselines last in the table
-        order = list(res["predictors"])
-        res["predictors"] = {k: res["predictors"][k] for k in sorted(order, key=lambda k: (k in R.BASELINES,
-                                                                                            order.index(k)))}
-        res["load_end"] = load()
-        md = markdown(res)
-        if not args.quick:
-            path = write_results(args.name, res).removesuffix(".json") + ".md"
-            with open(path, "w") as f:
-                f.write(md + "\n")
+        save()
     print(markdown(res))
     return res
 
@@ -441,217 +476,95 @@ class _Cap(Exception):
 
 
 def fit_cost(args):
-    subjects, kw = SUBJECTS, dict(max_steps=tuple(args.max_steps))
+    """The default fit of the bundled subjects (compile apart) against the SciPy loop on one
+    subject, extrapolated from its seconds per residual call."""
+    subjects, kw = SUBJECTS, (dict(max_steps=tuple(args.max_steps)) if args.max_steps else {})
+    nfev = args.scipy_nfev
     if args.quick:
-        subjects, kw = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2))
-    log(f"fit_reaching({list(subjects)}) default model ...")
+        subjects, kw, nfev = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2)), 2
+    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(), machine=bl.machine(),
+               options={k: list(v) for k, v in kw.items()})
+    log(f"fit_reaching({list(subjects)}) {kw or 'defaults'} ...")
     fit, wall, comp = timed_fit(subjects, **kw)
-    log(f"  {wall:.0f} s wall, {comp:.0f} s compile, status {fit.status.tolist()}, lm {fit.lm_steps.tolist()}")
-    return scipy_compare(args, fit, wall, comp, subjects, kw)
-
-
-def scipy_compare(args, fit, wall, comp, subjects, kw):
-    """The SciPy loop on one subject against the JAX fit ``fit`` (default model) of ``subjects``."""
-    nfev = 2 if args.quick else args.scipy_nfev
-    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(),
-               machine="2-core AMD EPYC Zen 4 KVM, no GPU", options={k: list(v) for k, v in kw.items()})
     S = len(subjects)
-    res["jax"] = dict(wall_s=wall, compile_s=comp, run_s=wall - comp, run_s_per_subject=(wall - comp) / S,
-                      load=load(), status=fit.status.tolist(), lm_steps=fit.lm_steps.tolist(),
-                      n_motions=fit.n_motions.tolist(), loss=fit.loss.tolist(), steps_per_sample=fit.steps_per_sample,
+    log(f"  {wall:.0f} s wall, {comp:.0f} s compile, status {fit.status.tolist()}, lm {fit.lm_steps.tolist()}, "
+        f"{fit.solver} x{fit.steps_per_sample}")
+    # a second call with the same shapes: everything compiled, the run alone
+    p0 = time.perf_counter()
+    fitting.fit_reaching(subjects, **kw)
+    warm = time.perf_counter() - p0
+    res["jax"] = dict(wall_s=wall, compile_s=comp, run_s=wall - comp, warm_s=warm, warm_s_per_subject=warm / S,
+                      status=fit.status.tolist(), lm_steps=fit.lm_steps.tolist(), n_motions=fit.n_motions.tolist(),
+                      loss=fit.loss.tolist(), solver=fit.solver, steps_per_sample=fit.steps_per_sample,
+                      integration_error_deg=fit.integration_error_deg.tolist(), load=load(),
                       compile_method="union of jax.monitoring trace/lower/compile time spans inside the call")
 
-    # the same stage-1 start as the fit (same shapes and options: a compilation-cache hit)
-    reps, tasks = fit.reps, fit.tasks
-    ms = [R._motions(s, None, reps, tasks) for s in subjects]
-    cfg = R._Config(fit.model, fit.damping, fit.time_constants, 5)  # fit_reaching's default steps_per_sample
-    q_obs, t_ratio, weight = R._stack_motions(ms)
-    elbow = np.stack([m.q_obs[:, -1, 3].mean() for m in ms])
-    th1 = np.concatenate([np.zeros((S, R._N_K)), np.stack([m.q_obs[:, -1, :3].mean(0) for m in ms])], -1)
-    s1 = jax.device_get(R._stage1_batch(th1, q_obs, t_ratio, weight, elbow, np.int32(kw["max_steps"][0]),
-                                        cfg=cfg))
-
-    k = int(np.argmin([len(m) for m in ms]))  # the subject with the fewest motions
-    m = ms[k]
+    k = int(np.argmin(fit.n_motions))  # the subject with the fewest motions
+    m = R._motions(fit.subjects[k], None, fit.reps, fit.tasks)
     p = len(fit.param_names)
-    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}), capped at {nfev} residual evaluations ...")
+    elbow = m.q_obs[:, -1, 3].mean()
+    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}), capped at {nfev} residual calls ...")
     calls, costs = [], []
 
     def fun(theta):
         if len(calls) >= nfev:
             raise _Cap
         t = time.perf_counter()
-        r = residual_np(theta, m.q_obs, m.t_ratio, elbow[k])
+        r = residual_np(theta, m.q_obs, m.t_ratio, elbow)
         calls.append(time.perf_counter() - t)
         costs.append(0.5 * float(r @ r))
         return r
 
-    t = time.perf_counter()
-    try:  # capped at nfev residual calls: the start and the first Jacobian columns
-        scipy.optimize.least_squares(fun, s1["start"][k], method="lm", xtol=1e-8, ftol=1e-8)
+    try:  # the start and the first Jacobian columns: seconds per residual call
+        scipy.optimize.least_squares(fun, fit.params[k], method="lm", xtol=1e-8, ftol=1e-8)
     except _Cap:
         pass
-    t_sp = time.perf_counter() - t
-    nfev = len(calls) + 1
-    fun(fit.params[k])  # the same residual at the JAX optimum
-    c_opt = costs[-1]
     per_eval = float(np.median(calls))
     it = int(fit.lm_steps[k][1])
     extrap = per_eval * (p + 1) * max(it, 1)
-    jax_subject = (wall - comp) / S
-    res["scipy"] = dict(
-        subject=m.subject, n_motions=len(m), p=p, max_nfev=nfev, residual_calls=len(calls), seconds=t_sp,
-        seconds_per_residual=per_eval, start_cost=costs[0],
-        jax_final_cost=float(fit.loss[k]),
-        numpy_cost_at_jax_optimum=c_opt, rel_cost_diff_at_jax_optimum=abs(c_opt / float(fit.loss[k]) - 1),
-        jax_lm_iterations=it, extrapolated_seconds=extrap, load=load(),
-        integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9", optimiser="least_squares lm, 2-point Jacobian")
-    res["ratios"] = {"scipy_subject_vs_jax_subject_run": extrap / jax_subject,
-                     "scipy_subject_vs_jax_subject_incl_compile": extrap / (wall / S)}
+    # the same computation: NumPy's cost at the JAX optimum against the JAX fit's data cost
+    per = (R.SAMPLES - 1) * 4 + 4
+    pred_rows = R._fit_motions([m], R._Config(fit.model, fit.damping, fit.time_constants, 5,
+                                              cond_max=fit.stiffness_cond_max),
+                               theta0=fit.params[k][None], max_steps=(1, 0), steps=fit.steps_per_sample,
+                               solver=fit.solver)["residual"][0][: len(m) * per]
+    jax_cost = 0.5 * float(pred_rows @ pred_rows)
+    res["scipy"] = dict(subject=m.subject, n_motions=len(m), p=p, residual_calls=len(calls),
+                        seconds_per_residual=per_eval, numpy_cost_at_jax_optimum=costs[0],
+                        jax_data_cost_at_jax_optimum=jax_cost, jax_lm_iterations=it, extrapolated_seconds=extrap,
+                        load=load(), integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9",
+                        optimiser="least_squares lm, 2-point Jacobian")
+    res["ratios"] = {"stage 2 per subject: SciPy loop / fit_reaching (run)": extrap / (warm / S),
+                     "stage 2 per subject: SciPy loop / fit_reaching (compile included)": extrap / (wall / S)}
+    res["targets"] = {"stage 2 per subject: SciPy loop / fit_reaching (run)": 50.0}
     res["load_end"] = load()
-    log(f"  SciPy {per_eval:.1f} s per residual ({len(calls)} calls); cost at the stage-1 start "
-        f"{costs[0]:.5g}; JAX final "
-        f"{fit.loss[k]:.5g}, NumPy at the JAX optimum {c_opt:.5g}")
     print(f"\n| | compile [s] | run [s] | per subject [s] | load |\n|---|---:|---:|---:|---:|\n"
-          f"| JAX fit_reaching, {S} subjects | {comp:.0f} | {wall - comp:.0f} | {jax_subject:.0f} | "
-          f"{res['jax']['load']:.1f} |\n| SciPy loop, {m.subject} (extrapolated: {per_eval:.1f} s x {p + 1} x "
-          f"{it} iterations) | — | — | {extrap:.0f} | {res['scipy']['load']:.1f} |\n")
-    print(f"ratio SciPy / JAX per subject: {res['ratios']['scipy_subject_vs_jax_subject_run']:.0f}x (run), "
-          f"{res['ratios']['scipy_subject_vs_jax_subject_incl_compile']:.0f}x (compile included)")
+          f"| fit_reaching, {S} subjects ({fit.solver} ×{fit.steps_per_sample}) | {comp:.0f} | {warm:.0f} | "
+          f"{warm / S:.1f} | {res['jax']['load']:.1f} |\n"
+          f"| SciPy loop, {m.subject} (extrapolated: {per_eval:.1f} s × {p + 1} × {it} iterations) | — | — | "
+          f"{extrap:.0f} | {res['scipy']['load']:.1f} |\n")
+    print(f"NumPy cost at the JAX optimum {costs[0]:.6g}, JAX {jax_cost:.6g}")
+    for name, v in res["ratios"].items():
+        print(f"{name}: {v:.0f}x")
     if not args.quick:
         print(f"results -> {write_results('reaching', res)}")
     return res
 
 
-def merge(args):
-    """Combine the tables of separate runs (``--name`` of each) into ``reaching_table``: every fit
-    and predictor, and paired Wilcoxon tests between runs with the same held-out rows."""
-    import pickle
-
-    base = os.path.dirname(write_results("reaching_table_merge_probe", {}))
-    os.remove(os.path.join(base, "reaching_table_merge_probe.json"))
-    runs = [json.load(open(os.path.join(base, f"{n}.json"))) for n in args.merge]
-    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=runs[0]["machine"],
-               merged=list(args.merge), subjects=sorted({s for r in runs for s in r["subjects"]}), fits={},
-               predictors={}, wilcoxon={})
-    preds = {}
-    for n, r in zip(args.merge, runs):
-        tag = f" [{','.join(r['subjects'])}; max_steps {r['options']['max_steps']}]"
-        for k, v in r["fits"].items():
-            res["fits"][k + tag] = v
-            _, d, t = k.split("/")
-            preds[k + tag] = pickle.load(open(os.path.join(base, f"{n}_{d}_{t}_pred.pkl"), "rb"))
-        for k, v in r["predictors"].items():
-            key = k + tag if k in r["fits"] else k
-            if k in R.BASELINES and k in res["predictors"] and len(res["predictors"][k]) >= len(v):
-                continue
-            res["predictors"][key] = {s: v.get(s, _EMPTY) for s in res["subjects"] + ["all"]}
-    keys = list(preds)
-    for i, a in enumerate(keys):
-        for b_ in keys[i + 1:]:
-            pa, pb = preds[a], preds[b_]
-            if len(pa.task) == len(pb.task) and np.array_equal(pa.rep, pb.rep) and np.array_equal(pa.task, pb.task):
-                res["wilcoxon"][f"{b_} vs {a}"] = wilcoxon(pa, pb)
-    for w in res["wilcoxon"].values():
-        for s in res["subjects"] + ["all"]:
-            w.setdefault(s, None)
-    order = list(res["predictors"])
-    res["predictors"] = {k: res["predictors"][k] for k in sorted(order, key=lambda k: (k in R.BASELINES,
-                                                                                        order.index(k)))}
-    md = markdown(res)
-    path = write_results("reaching_table", res).removesuffix(".json") + ".md"
-    with open(path, "w") as f:
-        f.write(md + "\n")
-    print(md)
-
-
-_EMPTY = dict(final=dict(n=0, n_failed=0, median=None, mean=None), rmse=dict(n=0, n_failed=0, median=None, mean=None))
-
-
-def scipy_from(args):
-    """The SciPy loop on the one subject of a pickled ``--table`` run (``--scipy-from NAME``) whose
-    stage 2 made no accepted step, so that its parameters are the stage-1 point (checked against the
-    stage-1-only run ``reaching_table_donders`` when present); JAX timings from that run's JSON."""
-    import pickle
-
-    base = os.path.dirname(write_results("reaching_probe", {}))
-    os.remove(os.path.join(base, "reaching_probe.json"))
-    run = json.load(open(os.path.join(base, f"{args.scipy_from}.json")))
-    (key, f), = run["fits"].items()
-    _, d, t = key.split("/")
-    fit = pickle.load(open(os.path.join(base, f"{args.scipy_from}_{d}_{t}.pkl"), "rb"))
-    assert len(fit.subjects) == 1 and d == "tau0_KJ" and t == "tied"
-    m = R._motions(fit.subjects[0], None, fit.reps, fit.tasks)
-    elbow = m.q_obs[:, -1, 3].mean()
-    p, it = len(fit.param_names), int(fit.lm_steps[0][1])
-    start = fit.params[0]
-    calls, costs = [], []
-
-    def fun(theta):
-        if len(calls) >= args.scipy_nfev:
-            raise _Cap
-        t0 = time.perf_counter()
-        r = residual_np(theta, m.q_obs, m.t_ratio, elbow)
-        calls.append(time.perf_counter() - t0)
-        costs.append(0.5 * float(r @ r))
-        return r
-
-    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}) from the stage-1 point, capped at "
-        f"{args.scipy_nfev} residual calls ...")
-    t0 = time.perf_counter()
-    try:
-        scipy.optimize.least_squares(fun, start, method="lm", xtol=1e-8, ftol=1e-8)
-    except _Cap:
-        pass
-    t_sp = time.perf_counter() - t0
-    per_eval = float(np.median(calls))
-    jax_run = f["run_s"]
-    extrap = per_eval * (p + 1) * max(it, 1)
-    res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine="2-core AMD EPYC Zen 4 KVM, no GPU",
-               jax=dict(run=args.scipy_from, subject=m.subject, wall_s=f["wall_s"], compile_s=f["compile_s"],
-                        run_s=jax_run, load=f["load"], lm_steps=fit.lm_steps.tolist(), loss=float(fit.loss[0]),
-                        steps_per_sample=fit.steps_per_sample,
-                        compile_method="union of jax.monitoring trace/lower/compile time spans inside the call"),
-               scipy=dict(subject=m.subject, n_motions=len(m), p=p, residual_calls=len(calls), seconds=t_sp,
-                          seconds_per_residual=per_eval, cost_at_start=costs[0], jax_cost_at_start=float(fit.loss[0]),
-                          rel_cost_diff=abs(costs[0] / float(fit.loss[0]) - 1), jax_lm_iterations=it,
-                          extrapolated_seconds=extrap, load=load(),
-                          integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9",
-                          optimiser="least_squares lm, 2-point Jacobian"),
-               ratios={"scipy_subject_vs_jax_subject_run": extrap / jax_run,
-                       "scipy_subject_vs_jax_subject_incl_compile": extrap / f["wall_s"]})
-    log(f"  SciPy {per_eval:.1f} s per residual ({len(calls)} calls); cost at the start: NumPy {costs[0]:.6g}, "
-        f"JAX {fit.loss[0]:.6g}; extrapolated {extrap:.0f} s vs JAX run {jax_run:.0f} s "
-        f"({res['ratios']['scipy_subject_vs_jax_subject_run']:.1f}x)")
-    print(f"results -> {write_results('reaching', res)}")
-
-
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--table", action="store_true")
+    ap.add_argument("--table", action="store_true", help="the held-out table of every variant")
     ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="with --table: HuG-MP subjects")
-    ap.add_argument("--scipy-from", help="the SciPy loop against a pickled one-subject --table run (NAME)")
-    ap.add_argument("--merge", nargs="+", help="combine the tables of these runs (--name) into reaching_table")
     ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
     ap.add_argument("--variants", nargs="+", choices=sorted(VARIANT_NAMES), help="with --table: these variants")
-    ap.add_argument("--n-variants", type=int, default=None, help="with --table: only the first N variants")
-    ap.add_argument("--no-scipy", action="store_true", help="with --table: skip the SciPy comparison")
-    ap.add_argument("--fitted", action="store_true", help="with --table: the fitted time-constant variants too")
-    ap.add_argument("--max-steps", type=int, nargs=2, default=(40, 3),
-                    help="LM iterations of stage 1 and stage 2 (fit_reaching's default is 40 25)")
+    ap.add_argument("--max-steps", type=int, nargs=2, default=None, help="LM iterations (default: fit_reaching's)")
     ap.add_argument("--scipy-nfev", type=int, default=3, help="residual calls of the capped SciPy fit")
     args = ap.parse_args()
-    if args.merge:
-        merge(args)
-        return
-    if args.scipy_from:
-        scipy_from(args)
-        return
     if args.table:
         table(args)
-        return
-    fit_cost(args)
+    else:
+        fit_cost(args)
 
 
 if __name__ == "__main__":

@@ -79,14 +79,18 @@ def stiffness_from_params(s, n: int, trace: float = 4.0):
     return _stiffness_from_params(_params_vector("s", s, n, n * (n + 1) // 2 - 1), n, trace)
 
 
+def log_stiffness(s, n):
+    """The traceless symmetric ``S`` (n, n) of parameters ``s`` (n(n+1)/2 − 1,) (JAX):
+    ``KJ ∝ expm(S)``, so ``cond(KJ) = exp(λ_max(S) − λ_min(S))``."""
+    S = jnp.zeros((n, n), s.dtype)
+    for k, (i, j) in enumerate(_sym_index(n)):
+        S = S.at[i, j].set(s[k]).at[j, i].set(s[k])
+    return S.at[n - 1, n - 1].set(-sum(s[k] for k in range(n - 1)))
+
+
 @partial(fast_compile_jit, static_argnums=1)
 def _stiffness_from_params(s, n, trace):
-    idx = _sym_index(n)
-    S = jnp.zeros((n, n), s.dtype)
-    for k, (i, j) in enumerate(idx):
-        S = S.at[i, j].set(s[k]).at[j, i].set(s[k])
-    S = S.at[n - 1, n - 1].set(-sum(s[k] for k in range(n - 1)))
-    E = _expm_sym(S)
+    E = _expm_sym(log_stiffness(s, n))
     return trace * E / jnp.trace(E)
 
 

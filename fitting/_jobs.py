@@ -347,22 +347,23 @@ def pointing(ctx) -> dict:
     }
 
 
+#: ``fit_reaching`` options of the reaching part's ``--quick`` run (bundled S02).
+REACHING_QUICK = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 4), time_constants="fitted")
+
+
 def reaching(ctx) -> dict:
     """Held-out prediction of the bundled HuG-MP arm movements (repetitions 8–10) by the λ0-PMP
-    Donders-fitted per subject on repetitions 1–7 (stiffness and rest posture from the final
-    postures through the equilibria), against every baseline; a table and one figure per subject."""
+    fitted per subject to the joint trajectories of repetitions 1–7 (stiffness, rest posture; the
+    final postures through the equilibria first), against every baseline; a table and one figure
+    per subject."""
     import json
 
     from ._reaching import fit_reaching, plot_reaching_subject, predict_reaching
 
-    # The Donders-fitted model (final postures through the equilibria, no trajectory stage), as the
-    # paper fits the wrist: the trajectory stage (``max_steps=(40, 25)``) costs minutes per LM
-    # iteration for the four subjects on two cores (fit_reaching's docstring), too much for the
-    # main job. Full: all four subjects, every task, repetitions 1-7 (~20 s fit + ~30 s prediction);
-    # --quick: one subject, task 1, repetitions 1-2 (the sizes of tests/test_reaching.py).
+    # Full: fit_reaching's defaults on all four subjects, every task (trajectories included: RODAS4,
+    # about 2.5 min on two cores); --quick: one subject, task 1, repetitions 1-2, a few iterations.
     subjects = (2,) if ctx.quick else (1, 2, 3, 4)
-    opts = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 0), time_constants="fitted", steps_per_sample=10) \
-        if ctx.quick else dict(max_steps=(40, 0))
+    opts = REACHING_QUICK if ctx.quick else {}
     fit = fit_reaching(subjects, **opts)
     pred = predict_reaching(fit, reps=(8, 9, 10))
     pred.to_csv(ctx.out / "reaching_hugmp_motions.csv")
@@ -371,13 +372,14 @@ def reaching(ctx) -> dict:
               "Held-out HuG-MP motions (repetitions 8–10): mean final-posture error and joint-trajectory RMSE "
               "[deg] per subject and predictor — the fitted λ0-PMP ('model'), straight minimum-jerk hand paths "
               "through the plain and the IK-weighted pseudo-inverse, the unfitted λ0-PMP, and the joint-space "
-              "minimum-jerk oracle that knows the recorded final posture. The model is Donders-fitted (stiffness and "
-              "rest posture from the final postures of repetitions 1–7 only); 'n' counts the motions it simulates: a "
-              "nearly singular fitted stiffness makes Eq 10's gain too stiff for RK4, and those motions are reported "
-              "as failed (NaN), not dropped silently. 'final_error_donders_deg' (model rows; 'n_donders' motions) is "
-              "the error of the model's equilibrium posture at each held-out target, its Donders-law prediction of "
-              "the final posture, which needs no simulation.",
-              "Not in the papers: the λ0-PMP tested on whole-arm reaching (issue 12).")
+              "minimum-jerk oracle that knows the recorded final posture. The model is fitted per subject to the "
+              "joint trajectories of repetitions 1–7 (Levenberg–Marquardt through the simulator, the stiff solver "
+              f"{fit.solver.upper()} at {fit.steps_per_sample} steps per sample); 'n' counts the motions each "
+              "predictor simulates (failures are NaN, not dropped). 'final_error_donders_deg' (model rows; "
+              "'n_donders' motions) is the error of the model's equilibrium posture at each held-out target, its "
+              "Donders-law prediction of the final posture.",
+              "Not in the papers: the λ0-PMP tested on whole-arm reaching. Every variant of the model against "
+              "these baselines, with paired tests: benchmarks/reaching.py --table.")
     (ctx.out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
     for s in dict.fromkeys(pred.subject.tolist()):
         ctx.figure(plot_reaching_subject(pred, s, predictors=("model", "pinv_minjerk", "joint_minjerk_oracle")),
@@ -389,6 +391,9 @@ def reaching(ctx) -> dict:
             + f"; Donders final-posture error of the model {np.nanmean(pred.final_error_donders_deg):.1f} deg")
     return {
         "subjects": list(fit.subjects), "status": fit.status.tolist(), "n_fitted_motions": fit.n_motions.tolist(),
+        "lm_steps": fit.lm_steps.tolist(), "solver": fit.solver, "steps_per_sample": fit.steps_per_sample,
+        "integration_error_deg": _js(fit.integration_error_deg, 6)[0], "stiffness_cond": _js(fit.stiffness_cond, 2)[0],
+        "bound_active": fit.bound_active.tolist(), "train_rmse_deg": _js(fit.rmse_deg, 3)[0],
         "KJ": np.round(fit.KJ, 4).tolist(), "q_rest_deg": np.round(np.rad2deg(fit.q_rest), 2).tolist(),
         "held_out_motions": int(len(pred.task)), "summary": rows, "mean_rmse_deg": mean,
         "mean_final_error_deg": {name: float(np.nanmean(b.final_error_deg)) for name, b in pred.predictors().items()},

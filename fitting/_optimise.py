@@ -68,13 +68,18 @@ def least_squares(
     gtol: float = 1e-10,
     ftol: float = 1e-12,
     xtol: float = 1e-12,
+    stol: float | None = None,
     damping: float = 1e-3,
 ) -> LeastSquaresResult:
     """Minimise ``½ |residual(x, args)|²`` over ``x`` (p,) by Levenberg–Marquardt.
 
     Marquardt scaling (damping on ``diag(JᵀJ)``) and Nielsen's damping update. Converged when
     ``|Jᵀr|_∞ <= gtol``, or an accepted step changes the cost by ``<= ftol·cost``, or the step is
-    ``<= xtol (|x| + xtol)``. Non-finite trial residuals are rejected steps.
+    ``<= xtol (|x| + xtol)``, or (``stol``, statistical) the full Gauss–Newton step would lower the
+    cost by less than ``stol·σ²`` with ``σ² = 2 cost/(N − p)``: every parameter is then within
+    ``√(2 stol)`` standard errors of the optimum (``stol = 1e-4``: 0.014), which is what a fit to
+    noisy data can mean by converged, also where the residual is only piecewise smooth (thresholds,
+    interpolation) and Levenberg–Marquardt would crawl. Non-finite trial residuals are rejected steps.
     """
     if not callable(residual):
         raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
@@ -83,7 +88,7 @@ def least_squares(
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")
     if is_concrete(max_steps):  # (a traced step limit, e.g. per item under lax.map, is the caller's)
         max_steps = check_positive_int("max_steps", max_steps)
-    for name, v in (("gtol", gtol), ("ftol", ftol), ("xtol", xtol)):
+    for name, v in (("gtol", gtol), ("ftol", ftol), ("xtol", xtol), ("stol", 0.0 if stol is None else stol)):
         if not (np.isfinite(v) and v >= 0):
             raise ValueError(f"`{name}` must be a finite tolerance >= 0, got {v}")
     check_positive("damping", damping)
@@ -110,8 +115,8 @@ def least_squares(
                   lam=jnp.asarray(damping, dtype), nu=jnp.asarray(2.0, dtype), step=jnp.asarray(0),
                   done=jnp.asarray(False), conv=jnp.asarray(False), first=jnp.asarray(True))
 
-    def cond(s):
-        return (~s["done"]) & (s["step"] < max_steps)
+    def cond(s):  # (the first pass, the linearisation at x0, runs even for a traced max_steps = 0)
+        return (~s["done"]) & ((s["step"] < max_steps) | s["first"])
 
     def body(s):
         x, r, J, cost, lam, nu, first = s["x"], s["r"], s["J"], s["cost"], s["lam"], s["nu"], s["first"]
@@ -135,6 +140,8 @@ def least_squares(
         )
         small_g = ~first & (jnp.max(jnp.abs(J.T @ r)) <= gtol)
         conv = small_g | small_f | small_step
+        if stol is not None:
+            conv = conv | (~first & (_gauss_newton_gain(J, r) <= stol * 2.0 * cost / max(N - p, 1)))
         # A non-finite start stops the loop (reported as not converged).
         done = conv | (first & ~ok)
         return dict(x=x, r=r, J=J, cost=cost,
@@ -149,6 +156,13 @@ def least_squares(
     status = jnp.where(~finite, Status.NONFINITE, jnp.where(conv, Status.SUCCESSFUL, Status.MAX_STEPS))
     return LeastSquaresResult(x=s["x"], cost=s["cost"], residual=s["r"], jac=s["J"], grad_norm=gn,
                               steps=s["step"], status=status)
+
+
+def _gauss_newton_gain(J, r):
+    """Cost decrease ``½ gᵀ (JᵀJ)⁺ g`` (``g = Jᵀr``) that the full Gauss–Newton step predicts."""
+    U, s, _ = jnp.linalg.svd(J, full_matrices=False)
+    keep = s > 1e-12 * s[0]
+    return 0.5 * jnp.sum(jnp.where(keep, U.T @ r, 0.0) ** 2)
 
 
 def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):

@@ -434,16 +434,6 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
 # --- model movements analysed like the data (JAX; shared with the time-constant fit) -------------
 
 
-def _interp_uniform(h, y, sq):
-    """Linear interpolation of ``y`` (B, n, ...) on the uniform grid ``i·h`` at ``sq`` (B, p)."""
-    n = y.shape[1]
-    i = jnp.clip(jnp.floor(sq / h).astype(int), 0, n - 2)
-    u = sq / h - i
-    take = lambda a, idx: jnp.take_along_axis(a, idx.reshape(idx.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa: E731
-    u = u.reshape(u.shape + (1,) * (y.ndim - 2))
-    return (1 - u) * take(y, i) + u * take(y, i + 1)
-
-
 def _hermite_uniform(h, y, dy, sq):
     """Cubic Hermite interpolation of ``y`` (B, n, k) with derivatives ``dy`` on the grid ``i·h``."""
     n = y.shape[1]
@@ -454,25 +444,61 @@ def _hermite_uniform(h, y, dy, sq):
     return h00 * take(y, i) + h10 * h * take(dy, i) + h01 * take(y, i + 1) + h11 * h * take(dy, i + 1)
 
 
+def _slopes(h, y):
+    """Derivatives of ``y`` (B, n) on the grid ``i·h`` by central differences (one-sided at the
+    ends): the slopes of the Catmull–Rom (C¹ cubic Hermite) interpolant."""
+    return jnp.concatenate([y[:, 1:2] - y[:, :1], (y[:, 2:] - y[:, :-2]) / 2, y[:, -1:] - y[:, -2:-1]], 1) / h
+
+
+def _hermite_pieces(h, y, m, j):
+    """Values and slopes (×h) at both ends of interval ``j`` (B,) of the interpolant of ``y``."""
+    take = lambda a, k: jnp.take_along_axis(a, k[:, None], axis=1)[:, 0]  # noqa: E731
+    return take(y, j), h * take(m, j), take(y, j + 1), h * take(m, j + 1)
+
+
+def _hermite_at(y0, d0, y1, d1, u):
+    """The cubic Hermite piece at ``u`` ∈ [0, 1] and its derivative d/du."""
+    p = (2 * u**3 - 3 * u**2 + 1) * y0 + (u**3 - 2 * u**2 + u) * d0 + (-2 * u**3 + 3 * u**2) * y1 + (u**3 - u**2) * d1
+    dp = (6 * u**2 - 6 * u) * (y0 - y1) + (3 * u**2 - 4 * u + 1) * d0 + (3 * u**2 - 2 * u) * d1
+    return p, dp
+
+
 def _crossings(h, v, threshold):
     """Onset and offset (B,) [grid units × h] where the speed ``v`` (B, n) crosses ``threshold`` of
-    its peak, before and after the peak, by linear interpolation (differentiable where the crossing
-    samples do not change); the peak is refined by a parabola through its neighbours."""
+    its peak, before and after the peak, on its C¹ (Catmull–Rom) interpolant; the peak is the
+    interpolant's maximum next to the largest sample. Both are continuously differentiable in ``v``
+    (linear interpolation and a discrete maximum made the fits' residual piecewise smooth, and
+    Levenberg–Marquardt crawled along its kinks)."""
     n = v.shape[1]
     idx = jnp.arange(n)
+    m = _slopes(h, v)
     i = jnp.clip(jnp.argmax(v, axis=1), 1, n - 2)
-    vm, v0, vp = (jnp.take_along_axis(v, (i + o)[:, None], axis=1)[:, 0] for o in (-1, 0, 1))
-    curv = vp - 2 * v0 + vm
-    peak = jnp.where(curv < 0, v0 - (vp - vm) ** 2 / (8 * jnp.where(curv < 0, curv, -1.0)), v0)
+    peak = jnp.take_along_axis(v, i[:, None], axis=1)[:, 0]
+    for j in (i - 1, i):  # p'(u) = a u² + b u + c on the intervals either side of the largest sample
+        y0, d0, y1, d1 = _hermite_pieces(h, v, m, j)
+        a, b, c = 6 * y0 + 3 * d0 - 6 * y1 + 3 * d1, -6 * y0 - 4 * d0 + 6 * y1 - 2 * d1, d0
+        disc = jnp.maximum(b * b - 4 * a * c, 0.0)
+        safe_a = jnp.where(jnp.abs(a) > 1e-300, a, 1.0)
+        for sgn in (1.0, -1.0):
+            quad = jnp.abs(a) > 1e-12 * (jnp.abs(b) + jnp.abs(c))
+            u = jnp.where(quad, (-b + sgn * jnp.sqrt(disc)) / (2 * safe_a), -c / jnp.where(b != 0, b, 1.0))
+            val = _hermite_at(y0, d0, y1, d1, jnp.clip(u, 0.0, 1.0))[0]
+            peak = jnp.maximum(peak, jnp.where((u >= 0) & (u <= 1), val, peak))
     level = threshold * peak
     below = v < level[:, None]
     i_on = jnp.max(jnp.where(below & (idx[None] < i[:, None]), idx[None], 0), axis=1)
-    i_off = jnp.min(jnp.where(below & (idx[None] > i[:, None]), idx[None], n - 1), axis=1)
-    a0, a1 = (jnp.take_along_axis(v, j[:, None], axis=1)[:, 0] for j in (i_on, i_on + 1))
-    b0, b1 = (jnp.take_along_axis(v, j[:, None], axis=1)[:, 0] for j in (i_off - 1, i_off))
-    s_on = h * (i_on + (level - a0) / jnp.where(a1 != a0, a1 - a0, 1.0))
-    s_off = h * (i_off - 1 + (b0 - level) / jnp.where(b1 != b0, b0 - b1, 1.0))
-    return s_on, s_off, peak
+    i_off = jnp.min(jnp.where(below & (idx[None] > i[:, None]), idx[None], n - 1), axis=1) - 1
+
+    def root(j):
+        """The crossing of ``level`` inside interval ``j``: Newton from the linear estimate."""
+        y0, d0, y1, d1 = _hermite_pieces(h, v, m, j)
+        u = jnp.clip((level - y0) / jnp.where(y1 != y0, y1 - y0, 1.0), 0.0, 1.0)
+        for _ in range(4):
+            f, df = _hermite_at(y0, d0, y1, d1, u)
+            u = jnp.clip(u - (f - level) / jnp.where(df != 0, df, 1.0), 0.0, 1.0)
+        return h * (j + u)
+
+    return root(i_on), root(i_off), peak
 
 
 def _silverman_weights(bandwidth, h, J):
@@ -530,7 +556,8 @@ def _profiles(tr, T, half, bandwidth, *, h, J, threshold, n_samples, radius, joi
     dense = s_on[:, None] + jnp.linspace(0.0, 1.0, 96)[None] * (s_off - s_on)[:, None]
     xd = _hermite_uniform(h, x, xdot, dense)
     a_sum, a_net = curvature_measures(xd, xd[:, 0], xd[:, -1], scale=radius)
-    out = dict(path=_hermite_uniform(h, x, xdot, sq), speed=_interp_uniform(h, v, sq), onset=s_on * T,
+    speed = _hermite_uniform(h, v[..., None], _slopes(h, v)[..., None], sq)[..., 0]
+    out = dict(path=_hermite_uniform(h, x, xdot, sq), speed=speed, onset=s_on * T,
                offset=s_off * T, duration=(s_off - s_on) * T, peak=peak, a_sum=a_sum, a_net=a_net)
     if joints:
         out["q_path"] = _hermite_uniform(h, _smooth(tr.q, w, edge=True), _smooth(tr.qdot, w, edge=False), sq)

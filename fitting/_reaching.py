@@ -87,7 +87,7 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 from pmpjax.internal import fast_compile_jit, hugmp_directory, pad_rows, row_chunks
 
-from ._donders import _sym_index, stiffness_from_params
+from ._donders import _sym_index, log_stiffness, stiffness_from_params
 from ._ik.analysis import overspecified_joints
 from ._ik.weights import estimate_ik_weights
 from ._optimise import covariance, least_squares
@@ -104,6 +104,24 @@ MIN_PATH = 0.03  # m
 STOPS_DEG = {2: 27.0, 3: 124.5}  # q3, q4: 1° inside the mechanical stops of the data README
 MIN_MANIPULABILITY = 2e-3  # m³: sqrt det J Jᵀ; ≈ 4° from a straight elbow at nominal lengths
 MAX_STEPS_PER_SAMPLE = 160  # RK4 steps per 1/49 of normalised time (7840 per movement)
+#: RODAS4 steps of the fits: at least 2 per sample interval, doubled until a step is at most
+#: ``ROSENBROCK_H_TAU`` of the fastest non-stiff time constant (``τ0``, ``τ``; stiffness itself
+#: costs RODAS4 no accuracy): 0.001° on the recordings (2 steps), 0.002° on the stiff synthetic
+#: movements of tests/test_reaching.py (4 steps); ``integration_error_deg`` checks it at the optimum.
+ROSENBROCK_STEPS = 2
+ROSENBROCK_H_TAU = 0.12
+#: Cost of one RODAS4 step in RK4 steps in the fits' forward-mode Jacobians (2.2 for a plain
+#: simulation; benchmarks/stiff.py): fits take RK4 when its stable step count costs less.
+ROSENBROCK_COST = 3.4
+#: Largest ``integration_error_deg`` a fit accepts silently (a warning above).
+INTEGRATION_TOL_DEG = 0.01
+#: Default bound on cond(KJ) (``fit_reaching(stiffness_cond_max=)``).
+STIFFNESS_COND_MAX = 100.0
+#: The fitted shoulder rest angles stay within the subject's recorded range widened by this [deg].
+REST_MARGIN_DEG = 20.0
+#: Weight of the bound residuals [rad per unit of violation]: stiff enough to hold a bound within
+#: about 1 % (the data residual's gradient is O(10)), soft enough for Levenberg–Marquardt.
+BOUND_WEIGHT = 30.0
 GAIN_CAP = 60.0  # 1/T_rec: cap of the time-base generator's task-velocity gain
 FINAL_WEIGHT = 1.0
 MODELS = ("lambda0", "lambda0_minjerk")
@@ -270,6 +288,8 @@ class _Config:
     steps: int  # RK4 steps per sample interval (1/49 of normalised time)
     ftol: float = 1e-8
     xtol: float = 1e-8
+    cond_max: float = STIFFNESS_COND_MAX  # bound on cond(KJ) (inf: none)
+    stol: float = 1e-4  # converged within 0.014 standard errors (fitting.least_squares)
 
 
 def _damping_size(damping):
@@ -406,10 +426,10 @@ def _rates_host(KJ, W, tau0, q0, *, minjerk: bool):
     return _host_rows(lambda *a: _rates_jit(*a, minjerk=minjerk), KJ, W, tau0, q0)
 
 
-def _simulate(model, planner, q0, target, steps: int):
-    """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` RK4 steps each."""
+def _simulate(model, planner, q0, target, steps: int, solver: str):
+    """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` steps each."""
     return pj.simulate(model, planner, q0, target, duration=1.0, dt=1.0 / ((SAMPLES - 1) * steps),
-                       saveat=pj.SaveAt(ts=_SAMPLE_TIMES))
+                       saveat=pj.SaveAt(ts=_SAMPLE_TIMES), solver=solver)
 
 
 def _equilibria(p, target, q_final):
@@ -417,28 +437,46 @@ def _equilibria(p, target, q_final):
     return eq.q, eq.converged
 
 
+def _bound_residual(theta, data, cfg: _Config):
+    """The bounds as residuals (4,) [rad]: ``BOUND_WEIGHT`` times how far ``log cond(KJ)`` exceeds
+    ``log cond_max``, and how far each shoulder rest angle lies outside ``[lo, hi]`` (zero inside:
+    the fit is unregularised there)."""
+    w = jnp.linalg.eigvalsh(log_stiffness(theta[:_N_K], 4))
+    over_c = jnp.maximum(w[-1] - w[0] - math.log(cfg.cond_max), 0.0) if math.isfinite(cfg.cond_max) else 0.0 * w[0]
+    q = theta[_N_K:_N_P]
+    over_q = jnp.maximum(q - data["hi"], 0.0) + jnp.maximum(data["lo"] - q, 0.0)
+    return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])
+
+
 def _final_residual(theta, data, cfg: _Config):
-    """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·4,) [rad], equilibria of the fitted ``KJ``, ``q_rest``."""
-    q_obs, _, weight, elbow = data
+    """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·4,) [rad], equilibria of the fitted ``KJ``, ``q_rest``,
+    then the bounds (4,). ``data``: dict of ``q_obs`` (B, 50, 4), ``t_ratio``, ``weight`` (B,),
+    ``elbow`` (), ``lo``, ``hi`` (3,)."""
+    q_obs, weight = data["q_obs"], data["weight"]
     # stage 1 has only the postural parameters (KJ, q_rest): unpack them as the paper model
-    p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), elbow)
+    p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), data["elbow"])
     q_eq, ok = _equilibria(p, _chain().fk(q_obs[:, -1]), q_obs[:, -1])
     used = (weight > 0)[:, None]
     r = jnp.where(used, (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None], 0.0)  # left-out motions: 0
-    return jnp.where(ok[:, None] | ~used, r, jnp.nan).reshape(-1)
+    r = jnp.where(ok[:, None] | ~used, r, jnp.nan).reshape(-1)
+    return jnp.concatenate([r, _bound_residual(theta, data, cfg)])
 
 
-def _trajectory_residual(theta, data, cfg: _Config, steps: int):
+def _trajectory_residual(theta, data, cfg: _Config, steps: int, solver: str):
     """Stage 2: per motion ``(q_sim − q_obs)(s_k) √(w/49)``, k = 1..49, and
-    ``FINAL_WEIGHT (q_sim − q_obs)(1) √w`` (B·(49·4 + 4),) [rad]. Motions whose simulation fails,
-    or whose fastest rate would make RK4 unstable at this step size (``rate·h > 2.5``, the check
-    ``pmpjax.simulate`` makes outside ``jit``), give NaN, so LM rejects such parameters."""
-    q_obs, t_ratio, weight, elbow = data
-    p = _unpack(theta, cfg, elbow)
+    ``FINAL_WEIGHT (q_sim − q_obs)(1) √w`` (B·(49·4 + 4),) [rad], then the bounds (4,). Motions
+    whose simulation fails, or (RK4) whose fastest rate would make RK4 unstable at this step size
+    (``rate·h > 2.5``, the check ``pmpjax.simulate`` makes outside ``jit``), give NaN, so LM
+    rejects such parameters."""
+    q_obs, t_ratio, weight = data["q_obs"], data["t_ratio"], data["weight"]
+    p = _unpack(theta, cfg, data["elbow"])
     model, planner, tau0, W = _model_and_planner(p, t_ratio, cfg)
-    traj = _simulate(model, planner, q_obs[:, 0], _chain().fk(q_obs[:, -1]), steps)
-    rate = _rates(*jax.lax.stop_gradient((p["KJ"], W, tau0, q_obs[:, 0])), minjerk=cfg.model != "lambda0")
-    stable = rate / ((SAMPLES - 1) * steps) <= 2.5
+    traj = _simulate(model, planner, q_obs[:, 0], _chain().fk(q_obs[:, -1]), steps, solver)
+    if solver == "rk4":
+        rate = _rates(*jax.lax.stop_gradient((p["KJ"], W, tau0, q_obs[:, 0])), minjerk=cfg.model != "lambda0")
+        stable = rate / ((SAMPLES - 1) * steps) <= 2.5
+    else:
+        stable = True
     sw = jnp.sqrt(weight)
     d = traj.q - q_obs
     r = jnp.concatenate([(d[:, 1:] * (sw / math.sqrt(SAMPLES - 1))[:, None, None]).reshape(d.shape[0], -1),
@@ -446,51 +484,55 @@ def _trajectory_residual(theta, data, cfg: _Config, steps: int):
     used = weight > 0
     r = jnp.where(used[:, None], r, 0.0)  # left-out and padding motions contribute nothing
     good = ((traj.status == 0) & stable) | ~used
-    return jnp.where(good[:, None], r, jnp.nan).reshape(-1)
+    return jnp.concatenate([jnp.where(good[:, None], r, jnp.nan).reshape(-1), _bound_residual(theta, data, cfg)])
 
 
 @partial(fast_compile_jit, static_argnames=("cfg",))
-def _stage1_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Config):
-    """Stage 1 for all subjects (leading axis): ``KJ``, ``q_rest`` (``theta0`` (S, 12)) from the
-    final postures; the iteration limit is traced (one compilation for every limit)."""
+def _stage1_batch(theta0, data, max_steps, *, cfg: _Config):
+    """Stage 1 for all subjects (leading axis of ``theta0`` (S, 12) and of ``data``'s leaves):
+    ``KJ``, ``q_rest`` from the final postures; the iteration limit is traced (one compilation for
+    every limit)."""
 
-    def one(th0, q, tr, w, e):
-        r = least_squares(partial(_final_residual, cfg=cfg), th0, (q, tr, w, e), max_steps=max_steps,
-                          ftol=cfg.ftol, xtol=cfg.xtol)
+    def one(th0, dat):
+        r = least_squares(partial(_final_residual, cfg=cfg), th0, dat, max_steps=max_steps,
+                          ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
         cov, se, sv, _ = covariance(r)
-        return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, steps=r.steps,
+        return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status, steps=r.steps,
                     start=_stage2_start(r.x, cfg), cov=cov, se=se, sv=sv)
 
-    return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
+    return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
 @partial(fast_compile_jit, static_argnames=("cfg",))
-def _start_usable(theta0, q_obs, t_ratio, weight, elbow, *, cfg: _Config):
+def _start_usable(theta0, data, *, cfg: _Config):
     """(S, B) bool: motions whose final-posture equilibrium exists at the stage-1 start."""
 
-    def one(th, q, tr, w, e):
-        return jnp.all(jnp.isfinite(_final_residual(th, (q, tr, w, e), cfg).reshape(-1, 4)), axis=-1)
+    def one(th, dat):
+        return jnp.all(jnp.isfinite(_final_residual(th, dat, cfg)[:-4].reshape(-1, 4)), axis=-1)
 
-    return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
+    return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
-@partial(fast_compile_jit, static_argnames=("cfg", "steps"))
-def _stage2_batch(theta0, q_obs, t_ratio, weight, elbow, max_steps, *, cfg: _Config, steps: int):
+@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
+def _stage2_batch(theta0, data, max_steps, *, cfg: _Config, steps: int, solver: str):
     """Stage 2 for all subjects: every parameter from the trajectories; covariance at the end."""
 
-    def one(th0, q, tr, w, e):
-        r = least_squares(partial(_trajectory_residual, cfg=cfg, steps=steps), th0, (q, tr, w, e),
-                          max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol)
+    def one(th0, dat):
+        r = least_squares(partial(_trajectory_residual, cfg=cfg, steps=steps, solver=solver), th0, dat,
+                          max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
         cov, se, sv, _ = covariance(r)
-        return dict(x=r.x, cost=r.cost, residual=r.residual, jac=r.jac, converged=r.converged, steps=r.steps,
-                    cov=cov, se=se, sv=sv)
+        return dict(x=r.x, cost=r.cost, residual=r.residual, jac=r.jac, converged=r.converged, status=r.status,
+                    steps=r.steps, cov=cov, se=se, sv=sv)
 
-    return jax.lax.map(lambda a: one(*a), (theta0, q_obs, t_ratio, weight, elbow))
+    return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
-def _stack_motions(motions: list[_Motions], bucket: int = 16):
+def _stack_motions(motions: list[_Motions], bucket: int = 16) -> dict:
     """Pad subjects' motions to a common count (a multiple of ``bucket``; padding = copies of
-    the first motion with weight 0) -> q_obs (S, B, 50, 4), t_ratio (S, B), weight (S, B)."""
+    the first motion with weight 0) -> dict of ``q_obs`` (S, B, 50, 4), ``t_ratio``, ``weight``
+    (S, B), ``elbow`` (S,) (the gauge of the unidentifiable elbow rest angle, module docstring: the
+    mean final elbow angle), ``lo``, ``hi`` (S, 3) (the bounds of the shoulder rest angles: the
+    recorded range widened by ``REST_MARGIN_DEG``)."""
     B = max(bucket, -(-max(len(m) for m in motions) // bucket) * bucket)
     q, tr, w = [], [], []
     for m in motions:
@@ -499,51 +541,100 @@ def _stack_motions(motions: list[_Motions], bucket: int = 16):
         q.append(np.concatenate([m.q_obs, np.repeat(m.q_obs[:1], pad, 0)]))
         tr.append(np.concatenate([m.t_ratio, np.repeat(m.t_ratio[:1], pad)]))
         w.append(np.concatenate([np.ones(n), np.zeros(pad)]))
-    return np.stack(q), np.stack(tr), np.stack(w)
+    margin = np.deg2rad(REST_MARGIN_DEG)
+    return dict(q_obs=np.stack(q), t_ratio=np.stack(tr), weight=np.stack(w),
+                elbow=np.array([m.q_obs[:, -1, 3].mean() for m in motions]),
+                lo=np.stack([m.q_obs[..., :3].min((0, 1)) - margin for m in motions]),
+                hi=np.stack([m.q_obs[..., :3].max((0, 1)) + margin for m in motions]))
 
 
-def _steps_for(theta, elbow, motions: list[_Motions], cfg: _Config, minimum: int) -> int:
-    """RK4 steps per sample interval that keep every motion's fastest rate at ``theta`` (S, p)
-    within half of RK4's stability bound."""
-    rates = []
-    for th, e, m in zip(theta, elbow, motions):
+def _integration(theta, motions: list[_Motions], data: dict, cfg: _Config, solver=None, steps=None):
+    """``(solver, steps per sample interval)`` for stage 2 at ``theta`` (S, p): RK4 at the fewest
+    steps (``cfg.steps`` times a power of two) that keep every motion's fastest rate within half
+    of RK4's stability bound, unless RODAS4 at ``ROSENBROCK_STEPS`` costs less (one RODAS4 step
+    costs ``ROSENBROCK_COST`` RK4 steps; its step count: ``ROSENBROCK_H_TAU``) or RK4 would need
+    more than ``MAX_STEPS_PER_SAMPLE``.
+    A given ``solver`` or ``steps`` is kept."""
+    rates, taus = [], []
+    for th, e, m in zip(theta, data["elbow"], motions):
         if not np.all(np.isfinite(th)):
             continue
         p = {k: v[0] for k, v in _unpack_host(th[None], cfg, np.atleast_1d(e)).items()}
         tau0, W = _tau0_W(p, np.asarray(m.t_ratio, float))
         rates.append(_rates_host(p["KJ"], W, tau0, m.q_obs[:, 0], minjerk=cfg.model != "lambda0"))
-    return _stability_steps(np.concatenate(rates) if rates else np.zeros(1), minimum)
+        taus.append(np.min(tau0) if cfg.model != "lambda0" else min(np.min(tau0), np.min(p["tau"] * m.t_ratio)))
+    rates = np.concatenate(rates) if rates else np.zeros(1)
+    rk4_steps = _stability_steps(rates, cfg.steps)
+    ros_steps, h_max = ROSENBROCK_STEPS, ROSENBROCK_H_TAU * min(taus, default=1.0)
+    while 1.0 / ((SAMPLES - 1) * ros_steps) > h_max and ros_steps < MAX_STEPS_PER_SAMPLE:
+        ros_steps *= 2
+    if solver is None:
+        rk4_ok = _stable(rates, rk4_steps) and rk4_steps <= ROSENBROCK_COST * ros_steps
+        solver = "rk4" if rk4_ok else "rodas4"
+    if steps is None:
+        steps = rk4_steps if solver == "rk4" else ros_steps
+    return solver, int(steps)
 
 
-def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), theta0=None,
-                 keep_jac: bool = False, steps: int | None = None) -> dict:
+def _stable(rates, steps) -> bool:
+    """Every finite rate within RK4's stability bound (2.5 of 2.78) at ``steps`` per sample."""
+    rates = np.asarray(rates, float)
+    return bool(np.all(rates[np.isfinite(rates)] / ((SAMPLES - 1) * steps) <= 2.5))
+
+
+@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
+def _integration_error_batch(theta, residual, data, *, cfg: _Config, steps: int, solver: str):
+    """(S,) largest joint difference [rad] over every used motion and sample between the fit's
+    simulations (read back from its stage-2 ``residual``) and simulations at ``2·steps`` per
+    sample: the integration error of the fit's, to within 1/15 (RK4, RODAS4: fourth order)."""
+
+    def one(th, res, dat):
+        p = _unpack(th, cfg, dat["elbow"])
+        model, planner, _, _ = _model_and_planner(p, dat["t_ratio"], cfg)
+        q_obs, w = dat["q_obs"], dat["weight"]
+        fine = _simulate(model, planner, q_obs[:, 0], _chain().fk(q_obs[:, -1]), 2 * steps, solver).q[:, 1:]
+        per = (SAMPLES - 1) * 4
+        r = res[: q_obs.shape[0] * (per + 4)].reshape(q_obs.shape[0], per + 4)[:, :per].reshape(-1, SAMPLES - 1, 4)
+        used = w > 0
+        fit = q_obs[:, 1:] + r * (math.sqrt(SAMPLES - 1) / jnp.sqrt(jnp.where(used, w, 1.0)))[:, None, None]
+        return jnp.max(jnp.where(used[:, None, None], jnp.abs(fit - fine), 0.0))
+
+    return jax.lax.map(lambda a: one(*a), (theta, residual, data))
+
+
+def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 100), theta0=None,
+                 keep_jac: bool = False, steps: int | None = None, solver: str | None = None) -> dict:
     """Fit every subject's usable motions (each ``len(m) >= 1``): stage 1, then (on the host) the
-    RK4 step count for stage 2 from the stage-1 parameters, then stage 2 (skipped when
-    ``max_steps[1] == 0``: a Donders-fitted model). ``theta0`` (S, p) skips stage 1 and starts
-    stage 2 there; ``steps`` overrides the RK4 step count."""
-    q_obs, t_ratio, weight = _stack_motions(motions)
+    solver and step count for stage 2 from the stage-1 parameters (:func:`_integration`), then
+    stage 2 (skipped when ``max_steps[1] == 0``: a Donders-fitted model), then the integration
+    error at the optimum; while it exceeds ``INTEGRATION_TOL_DEG`` (up to twice) the step count
+    grows by the power of two its fourth order asks for and stage 2 goes on from there.
+    ``theta0`` (S, p) skips stage 1 and starts stage 2 there; ``steps``/``solver`` override the
+    automatic choice."""
+    data = _stack_motions(motions)
     S = len(motions)
     p = len(_param_names(cfg))
     out, s1 = {}, None
     q_final_mean = np.stack([m.q_obs[:, -1].mean(0) for m in motions])
-    elbow = q_final_mean[:, 3]  # the gauge of the unidentifiable elbow rest angle (module docstring)
-    out["elbow"] = elbow
+    out["elbow"] = data["elbow"]
     out["dropped"] = [np.zeros(0, int) for _ in motions]
     if theta0 is None:
         th1 = np.concatenate([np.zeros((S, _N_K)), q_final_mean[:, :3]], -1)
         # A motion whose equilibrium fails at the start (KJ = I, q_rest = mean final posture) would
         # make the start non-finite and stop Levenberg–Marquardt for the whole subject: leave it out.
-        ok = np.asarray(_start_usable(th1, q_obs, t_ratio, weight, elbow, cfg=cfg))
+        ok = np.asarray(_start_usable(th1, data, cfg=cfg))
         out["dropped"] = [np.flatnonzero(~ok[s, : len(m)]) for s, m in enumerate(motions)]
-        weight = weight * ok
-        s1 = jax.device_get(_stage1_batch(th1, q_obs, t_ratio, weight, elbow, np.int32(max_steps[0]), cfg=cfg))
+        data["weight"] = data["weight"] * ok
+        s1 = jax.device_get(_stage1_batch(th1, data, np.int32(max_steps[0]), cfg=cfg))
         theta0 = s1["start"]
         out.update(x1=s1["x"], cost1=s1["cost"], converged1=s1["converged"], steps1=s1["steps"])
     else:
         theta0 = np.asarray(theta0, float).reshape(S, p)
         out.update(x1=theta0[:, :_N_P], cost1=np.full(S, np.nan), converged1=np.ones(S, bool),
                    steps1=np.zeros(S, int))
-    steps = _steps_for(theta0, elbow, motions, cfg, cfg.steps) if steps is None else int(steps)
+    fixed_steps = steps
+    solver, steps = _integration(theta0, motions, data, cfg, solver, steps)
+    out.update(solver=solver, steps_per_sample=steps, integration_error_deg=np.full(S, np.nan))
     if max_steps[1] == 0 and s1 is not None:
         # Donders-fitted model: the stage-1 result, extras at their tied start values
         k = _N_P
@@ -553,14 +644,31 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), t
         n_res = np.array([(len(m) - len(d)) * 4 for m, d in zip(motions, out["dropped"])])
         fix = (s1["residual"].shape[-1] - k) / np.maximum(n_res - k, 1)
         out.update(x=theta0, cost=s1["cost"], residual=s1["residual"], converged=s1["converged"],
-                   steps2=np.zeros(S, int), cov=cov * fix[:, None, None],
-                   se=pad(s1["se"] * np.sqrt(fix)[:, None], S, p - k), n_residuals=n_res,
-                   steps_per_sample=steps, stage=1)
+                   status=s1["status"], steps2=np.zeros(S, int), cov=cov * fix[:, None, None],
+                   se=pad(s1["se"] * np.sqrt(fix)[:, None], S, p - k), n_residuals=n_res, stage=1)
         return out
-    s2 = _stage2_batch(theta0, q_obs, t_ratio, weight, elbow, np.int32(max_steps[1]), cfg=cfg, steps=steps)
-    if not keep_jac:
-        s2.pop("jac")
-    out.update({k if k != "steps" else "steps2": v for k, v in jax.device_get(s2).items()})
+    lm_steps = np.zeros(S, int)
+    for refine in range(3):
+        s2 = _stage2_batch(theta0, data, np.int32(max_steps[1]), cfg=cfg, steps=steps, solver=solver)
+        if not keep_jac:
+            s2.pop("jac")
+        s2 = jax.device_get(s2)
+        lm_steps = lm_steps + s2["steps"]
+        if max_steps[1] == 0:  # (the residual and Jacobian at theta0 only)
+            err = np.full(S, np.nan)
+            break
+        err = np.rad2deg(np.asarray(_integration_error_batch(s2["x"], s2["residual"], data, cfg=cfg, steps=steps,
+                                                             solver=solver)))
+        finite = np.all(np.isfinite(s2["x"]), axis=-1)
+        if fixed_steps is not None or refine == 2 or np.all(~finite | (err <= INTEGRATION_TOL_DEG)):
+            break
+        theta0 = np.where(finite[:, None], s2["x"], theta0)
+        # fourth order: the step count that brings the largest error below the tolerance
+        worst = float(np.max(np.where(finite, err, 0.0)))
+        steps *= 2 ** max(1, math.ceil(math.log2((worst / INTEGRATION_TOL_DEG) ** 0.25)))
+        steps = min(steps, MAX_STEPS_PER_SAMPLE)
+    out.update({k if k != "steps" else "steps2": v for k, v in s2.items()})
+    out.update(steps2=lm_steps, steps_per_sample=steps, integration_error_deg=err)
     n_res = np.array([(len(m) - len(d)) * ((SAMPLES - 1) * 4 + 4) for m, d in zip(motions, out["dropped"])])
     N_total = out["residual"].shape[-1]
     # ``covariance`` divides by N − p over the padded residual; padded motions are not data.
@@ -568,7 +676,6 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 25), t
     out["cov"] = out["cov"] * fix[:, None, None]
     out["se"] = out["se"] * np.sqrt(fix)[:, None]
     out["n_residuals"] = n_res
-    out["steps_per_sample"] = steps
     out["stage"] = 2
     return out
 
@@ -594,6 +701,14 @@ class ReachingFit:
     from the fitted repetitions (baselines); ``skipped`` {subject: [(task, rep, index, reason)]}
     (unusable motions, and motions left out because the starting model has no equilibrium for them);
     ``problems`` {subject: message} for subjects that could not be fitted.
+
+    Integration (chosen automatically unless given): ``solver`` ("rk4" or "rodas4") and
+    ``steps_per_sample`` (steps per 1/49 of normalised time) of stage 2 and of
+    ``predict_reaching``; ``integration_error_deg`` (S,) the largest joint difference between the
+    fitted model's movements at that step count and at twice as many [deg] (NaN without stage 2).
+    Bounds: ``stiffness_cond`` (S,) cond(KJ) with its bound ``stiffness_cond_max``;
+    ``bound_active`` (S, 4) bool: the bound on cond(KJ) and on each shoulder rest angle binds at
+    the optimum (the fit presses against it: the data alone would go beyond).
     """
 
     subjects: tuple[str, ...]
@@ -627,6 +742,11 @@ class ReachingFit:
     steps_per_sample: int
     skipped: dict
     problems: dict
+    solver: str = "rk4"
+    integration_error_deg: np.ndarray | None = None
+    stiffness_cond: np.ndarray | None = None
+    stiffness_cond_max: float = STIFFNESS_COND_MAX
+    bound_active: np.ndarray | None = None
 
     @property
     def messages(self) -> list[str]:
@@ -791,8 +911,10 @@ def fit_reaching(
     damping: str = "tau0_KJ",
     time_constants: str = "tied",
     tasks=(1, 2, 3, 4, 5, 6),
-    max_steps=(40, 25),
+    max_steps=(40, 100),
     steps_per_sample: int | None = None,
+    solver: str | None = None,
+    stiffness_cond_max: float | None = STIFFNESS_COND_MAX,
 ) -> ReachingFit:
     """Fit the λ0-PMP per HuG-MP subject to the recorded movements of repetitions ``reps``.
 
@@ -805,16 +927,21 @@ def fit_reaching(
       ``time_constants``: "tied" (``τ = τ0 = T/5``) or "fitted" (per subject).
     - ``max_steps``: Levenberg–Marquardt iterations of stage 1 (final postures through the
       equilibrium) and stage 2 (trajectories through ``simulate``; 0 = a Donders-fitted model, as
-      in the paper); ``steps_per_sample``: RK4 steps per 1/49 of normalised time (default 5 for
-      the Arimoto planner, whose Eq 10 gain makes the task dynamics stiff, 2 for the time-base
-      generator).
+      in the paper).
+    - ``solver`` ("rk4", "rodas4") and ``steps_per_sample`` (steps per 1/49 of normalised time) of
+      stage 2: chosen from the stage-1 parameters when None (``_integration``: Eq 10's gain makes
+      the Arimoto model stiff, so RODAS4 at 3 steps; the time-base generator RK4 at 2), and the
+      step count doubled while the integration error at the optimum exceeds 0.01°. The result
+      says what was used (``solver``, ``steps_per_sample``, ``integration_error_deg``).
+    - ``stiffness_cond_max``: bound on cond(KJ) (None: no bound). Final postures alone leave
+      ``KJ`` and ``q_rest`` poorly determined (one redundant joint: one equation per posture), and
+      unbounded stage-1 fits drift to near-singular stiffness (cond 6 400 for S01) and rest angles
+      far outside the joint range; the bound, and the recorded joint range widened by 20° for the
+      shoulder rest angles, hold them (penalty residuals, zero inside; ``bound_active`` reports
+      where a bound binds at the optimum).
 
-    **Cost** (2 cores, idle, 2026-12-02, four subjects, every task, repetitions 1–7, 747
-    motions): stage 1 ``max_steps=(40, 0)`` 18 s with compilation (``predict_reaching`` then 30 s);
-    each stage-2 LM iteration takes minutes (one did not finish in 6 min idle; three took 30 min
-    under load), because Eq 10's gain at the stage-1 stiffness needs 160 RK4 steps per sample
-    (7840 per motion) and the Jacobian carries 13 tangents of each simulation
-    (benchmarks/reaching.py). The main job uses ``(40, 0)``.
+    **Cost** (2 cores, idle, four subjects, every task, repetitions 1–7, 747 motions): see
+    ``benchmarks/reaching.py``; stage 1 alone (``max_steps=(40, 0)``) takes seconds.
 
     All subjects are fitted in one compiled call (see the module docstring). A subject whose file
     is missing or malformed, or that has no usable motion, is reported in ``problems`` with
@@ -846,14 +973,18 @@ def fit_reaching(
         raise TypeError(f"`max_steps` must be a pair of integers, got {max_steps!r}") from e
     if len(ms) != 2 or ms[0] < 1 or ms[1] < 0:
         raise ValueError(f"`max_steps` must be (stage-1 >= 1, stage-2 >= 0) LM iterations, got {max_steps!r}")
-    if steps_per_sample is None:
-        steps_per_sample = 5 if model == "lambda0" else 2
-    pj_steps = int(steps_per_sample)
-    if pj_steps != steps_per_sample or pj_steps < 1:
-        raise ValueError(f"`steps_per_sample` must be a positive integer, got {steps_per_sample!r}")
+    if steps_per_sample is not None:
+        if isinstance(steps_per_sample, bool) or int(steps_per_sample) != steps_per_sample or steps_per_sample < 1:
+            raise ValueError(f"`steps_per_sample` must be a positive integer, got {steps_per_sample!r}")
+        steps_per_sample = int(steps_per_sample)
+    if solver is not None:
+        _check_choice("solver", solver, pj.SOLVERS)
+    cond_max = math.inf if stiffness_cond_max is None else float(stiffness_cond_max)
+    if not cond_max > 1.0:
+        raise ValueError(f"`stiffness_cond_max` must be > 1 (or None), got {stiffness_cond_max!r}")
     if directory is not None and not Path(directory).is_dir():
         raise ValueError(f"`directory` is not a folder: {directory}")
-    cfg = _Config(model, damping, time_constants, pj_steps)
+    cfg = _Config(model, damping, time_constants, 5 if model == "lambda0" else 2, cond_max=cond_max)
 
     problems, skipped, usable = {}, {}, {}
     for name in names:
@@ -875,7 +1006,7 @@ def fit_reaching(
         warnings.warn("fit_reaching: " + "; ".join(v[1] for v in problems.values()) + " (the other subjects go on)",
                       stacklevel=2)
     mlist = list(usable.values())
-    out = _fit_motions(mlist, cfg, max_steps=ms)
+    out = _fit_motions(mlist, cfg, max_steps=ms, steps=steps_per_sample, solver=solver)
     for name, m, dropped in zip(usable, mlist, out["dropped"]):
         skipped[name] += [(int(m.task[i]), int(m.rep[i]), int(m.index[i]),
                            "no equilibrium of the starting model (KJ = I, q_rest = mean final posture): "
@@ -901,6 +1032,7 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
                cov=nan(p, p), aic=nan(), bic=nan(), mean_posture=nan(4), ik_weights=nan(4))
     status = np.zeros(S, int)
     n_motions, n_res, lm_steps = np.zeros(S, int), np.zeros(S, int), np.zeros((S, 2), int)
+    integration, cond, active = nan(), nan(), np.zeros((S, 4), bool)
     order = list(usable)
     for a, name in enumerate(names):
         if name in problems:
@@ -925,16 +1057,19 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         res["ik_weights"][a] = ikw[k]
         n_motions[a], n_res[a] = n_fitted, n
         lm_steps[a] = out["steps1"][k], out["steps2"][k]
-        if not np.isfinite(cost):
-            status[a] = int(Status.NONFINITE)
-        elif not bool(out["converged"][k]):
-            status[a] = int(Status.MAX_STEPS)
+        integration[a] = out["integration_error_deg"][k]
+        ev = np.linalg.eigvalsh(pars["KJ"])
+        cond[a] = ev[-1] / ev[0]
+        active[a] = out["residual"][k][-4:] > 0
+        status[a] = int(out["status"][k]) if np.isfinite(cost) else int(Status.NONFINITE)
     return ReachingFit(
         subjects=tuple(names), converged=status == 0, status=status, param_names=_param_names(cfg),
         n_motions=n_motions, n_residuals=n_res, lm_steps=lm_steps, model=cfg.model, damping=cfg.damping,
         time_constants=cfg.time_constants, reps=tuple(reps), tasks=tuple(tasks),
         directory=None if directory is None else str(directory), steps_per_sample=int(out["steps_per_sample"]),
-        skipped=skipped, problems={k: v[1] for k, v in problems.items()}, **res,
+        skipped=skipped, problems={k: v[1] for k, v in problems.items()}, solver=out["solver"],
+        integration_error_deg=integration, stiffness_cond=cond, stiffness_cond_max=cfg.cond_max,
+        bound_active=active, **res,
     )
 
 
@@ -980,17 +1115,19 @@ def _status_from(traj_status):
     return np.where(s == 0, int(Status.SUCCESSFUL), np.where(s == 1, int(Status.NONFINITE), int(Status.SINGULAR)))
 
 
-def _simulate_rows(model, planner, q0, target, min_steps: int):
-    """Simulate rows (R,) with a step count that keeps RK4 well inside its stability bound;
-    returns ``q`` (R, 50, 4), ``x`` (R, 50, 3), ``status`` (R,) as ``pmpjax.Status`` codes."""
+def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
+    """Simulate rows (R,) with ``solver`` at ``steps`` per sample (RK4: at least, more if needed to
+    keep it well inside its stability bound); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
+    ``status`` (R,) as ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
     tau0 = planner.tau0 if not minjerk else np.ones(len(q0))
     rates = _rates_host(KJ, model.W, tau0, q0, minjerk=minjerk)
-    steps = _stability_steps(rates, min_steps)
-    # rows that are singular at q0 or too stiff for RK4 even at the most steps: SINGULAR, NaN
+    if solver == "rk4":
+        steps = _stability_steps(rates, steps)
+    # rows that are singular at q0 or (RK4) too stiff even at the most steps: SINGULAR, NaN
     # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
-    bad = ~np.isfinite(rates) | (rates / ((SAMPLES - 1) * steps) > 2.4)
+    bad = ~np.isfinite(rates) | ((solver == "rk4") & (rates / ((SAMPLES - 1) * steps) > 2.4))
     R_ = len(q0)
     if bad.all():
         nan = np.full((R_, SAMPLES), np.nan)
@@ -1000,7 +1137,7 @@ def _simulate_rows(model, planner, q0, target, min_steps: int):
         take = lambda a: a[good] if np.ndim(a) >= 1 and np.shape(a)[0] == R_ else a  # noqa: E731
         model, planner = jax.tree_util.tree_map(take, (model, planner))
         q0, target = np.asarray(q0)[good], np.asarray(target)[good]
-    traj = _simulate(model, planner, q0, target, steps)
+    traj = _simulate(model, planner, q0, target, steps, solver)
     q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
     q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
     return q, x, status
@@ -1030,7 +1167,7 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     if overlap:
         raise ValueError(f"`reps` {list(reps)} overlap the fitted repetitions {list(fit.reps)} at {overlap}: "
                          "held-out prediction needs repetitions the fit has not seen")
-    cfg = _Config(fit.model, fit.damping, fit.time_constants, fit.steps_per_sample)
+    cfg = _Config(fit.model, fit.damping, fit.time_constants, fit.steps_per_sample, cond_max=fit.stiffness_cond_max)
     problems, skipped, rows = dict(fit.problems), {}, []
     for a, name in enumerate(fit.subjects):
         if name in fit.problems or not np.all(np.isfinite(fit.params[a])):
@@ -1073,18 +1210,18 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     two = lambda a: np.concatenate([a, a])  # noqa: E731
     if cfg.model == "lambda0":
         q2, x2, s2 = _simulate_rows(_concat(model, model_u), _concat(planner, planner_u), two(q0), two(target),
-                                    fit.steps_per_sample)
+                                    fit.solver, fit.steps_per_sample)
         (qm, qu), (xm, xu), (sm, su) = np.split(q2, 2), np.split(x2, 2), np.split(s2, 2)
     else:
-        qm, xm, sm = _simulate_rows(model, planner, q0, target, fit.steps_per_sample)
-        qu, xu, su = _simulate_rows(model_u, planner_u, q0, target, 5)
+        qm, xm, sm = _simulate_rows(model, planner, q0, target, fit.solver, fit.steps_per_sample)
+        qu, xu, su = _simulate_rows(model_u, planner_u, q0, target, "rodas4", ROSENBROCK_STEPS)
 
     # straight hand path, minimum-jerk timing: PMP1 (q̇ = J#_W ẋ) under the time-base generator
     W_ik = np.stack([np.diag(fit.ik_weights[a]) for a in own])
     ik_ok = np.all(np.isfinite(W_ik.reshape(Bp, -1)), axis=-1)
     W_ik = np.where(ik_ok[:, None, None], W_ik, eye)
     mj = pj.MinimumJerkPlanner(duration=np.ones(2 * Bp), gain_cap=GAIN_CAP)
-    q2, x2, s2 = _simulate_rows(pj.PMP1(chain, W=np.concatenate([eye, W_ik])), mj, two(q0), two(target), 2)
+    q2, x2, s2 = _simulate_rows(pj.PMP1(chain, W=np.concatenate([eye, W_ik])), mj, two(q0), two(target), "rk4", 2)
     (qp, qi), (xp, xi), (sp_, si) = np.split(q2, 2), np.split(x2, 2), np.split(s2, 2)
     si = np.where(ik_ok, si, int(Status.INVALID_INPUT))
     s = np.asarray(_SAMPLE_TIMES)

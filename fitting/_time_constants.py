@@ -30,6 +30,7 @@ its own convergence, status and Gauss–Newton standard errors (delta method fro
 from __future__ import annotations
 
 import dataclasses
+import os
 from functools import partial
 
 import jax
@@ -48,6 +49,8 @@ from ._pointing import (
     _profiles,
     spline_bandwidth,
 )
+
+STOL = float(os.environ.get("TC_STOL", "1e-4"))
 
 #: Static simulation grid of the fits, in units of the movement's duration T_sj (the predictions'
 #: default): long enough for movements up to ~2 T_sj, steps ≤ τ/10 for τ ≥ 0.1 T_sj.
