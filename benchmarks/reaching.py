@@ -129,9 +129,11 @@ Findings (from these runs):
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
+from pathlib import Path
 
 import jax
 
@@ -411,6 +413,32 @@ def verdict(res) -> str:
             "trajectories (pooled, paired; median RMSE difference and p): " + "; ".join(losses) + ".")
 
 
+#: The pooled summary of the full table, shipped with fitting: the main job's report shows it.
+VARIANTS_TABLE = Path(fitting.__file__).parent / "data" / "reaching_variants.json"
+
+
+def variant_summary(res) -> dict:
+    """Per predictor: pooled held-out RMSE and final error (median, mean), fit status counts and
+    the paired tests against the pseudo-inverse baseline and the Donders-only model."""
+    rows = []
+    for name, pr in res["predictors"].items():
+        fit = res["fits"].get(name)
+        row = dict(predictor=name, rmse_median_deg=pr["all"]["rmse"]["median"], rmse_mean_deg=pr["all"]["rmse"]["mean"],
+                   final_median_deg=pr["all"]["final"]["median"], n=pr["all"]["rmse"]["n"],
+                   n_failed=pr["all"]["rmse"]["n_failed"])
+        if fit is not None:
+            st = [e["status"] for e in fit["subjects"].values()]
+            row.update(converged=f"{sum(v == 0 for v in st)}/{len(st)}",
+                       solver=f"{fit['solver']} x{fit['steps_per_sample']}", fit_wall_s=round(fit["wall_s"]))
+        for ref in ("pinv_minjerk", "donders_only"):
+            w = res["wilcoxon"].get(f"{name} vs {ref}", {}).get("all")
+            row[f"vs_{ref}"] = None if w is None else (f"{w['median_diff_deg']:+.2f} deg, p={w['p']:.2g}, "
+                                                       f"{w['b_better_fraction']:.0%} better")
+        rows.append(row)
+    return dict(date=res["date"], machine=res["machine"], subjects=res["subjects"], verdict=res["verdict"],
+                rows=rows, source="benchmarks/reaching.py --table")
+
+
 def table(args):
     import pickle
 
@@ -436,6 +464,8 @@ def table(args):
             write_results(args.name, res)
             with open(base + ".md", "w") as f:
                 f.write(markdown(res) + "\n")
+            if args.name == "reaching_table" and set(res["subjects"]) == {f"S{s:02d}" for s in SUBJECTS}:
+                VARIANTS_TABLE.write_text(json.dumps(variant_summary(res), indent=1) + "\n")
 
     # the Donders-only model (final postures, stage 1 only): the reference of every variant
     log("fit donders_only (stage 1 only) ...")

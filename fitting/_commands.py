@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import csv_floats
+from pmpjax.internal import csv_floats, input_file, output_dir, read_text_file
 
 
 def _x64():
@@ -52,7 +52,7 @@ def _fit_donders(args) -> int:
 
     rec = pj.read_recordings(args.file)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     wrist = pj.Wrist(d=float(rec.d))
     fit = fit_donders(wrist, rec.pointing, pj.joint_angles_from_quat(rec.quat), mask=rec.mask,
                       n_starts=args.starts)
@@ -85,9 +85,7 @@ def read_ik_file(path) -> dict:
     ``qdot_1..n``, ``xdot_1..m``, ``J_r_c`` row-major; one row per sample)."""
     import pmpjax as pj
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
+    path = input_file("path", path)
     suffix = path.suffix.lower()
     if suffix == ".mat":
         arr = pj.ik_dataset_arrays(pj.load_ik_dataset(path))
@@ -115,8 +113,8 @@ def read_ik_file(path) -> dict:
 
 
 def _read_ik_csv(path: Path) -> dict:
-    with path.open(newline="") as f:
-        lines = [(i + 1, ln) for i, ln in enumerate(f.read().splitlines()) if ln.strip() and not ln.startswith("#")]
+    text = read_text_file(path)
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.startswith("#")]
     if not lines:
         raise ValueError(f"{path}: empty file")
     header = [h.strip() for h in next(csv.reader([lines[0][1]]))]
@@ -128,6 +126,10 @@ def _read_ik_csv(path: Path) -> dict:
     if not n or not m or missing:
         raise ValueError(f"{path}: line {lines[0][0]}: header needs item, qdot_1..n, xdot_1..m and J_r_c "
                          f"columns; missing {missing or 'qdot_/xdot_ columns'}")
+    unknown = [h for h in header if h not in {"item", *qcols, *xcols, *jcols}]
+    if unknown:
+        raise ValueError(f"{path}: line {lines[0][0]}: unknown column(s) {unknown}; expected item, qdot_1..{n}, "
+                         f"xdot_1..{m}, J_r_c")
     idx = {h: header.index(h) for h in header}
     items: dict[str, list] = {}
     for lineno, ln in lines[1:]:
@@ -182,7 +184,7 @@ def _ik_weights(args) -> int:
     w = np.asarray(res.w)
     beta = np.asarray(contribution_coefficients(np.where(np.isfinite(w), w, 1.0)))
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     rows = [{"item": lab, "status": pj.status_message(int(status[i])), "converged": bool(res.converged[i]),
              **{f"w_{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
              **{f"beta_{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
@@ -234,7 +236,7 @@ def _analyze_pointing(args) -> int:
         if missing:
             raise ValueError(f"{args.donders}: no Donders session for subject(s) {missing} of {args.file}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     an = analyze_pointing(rec)
     text = an.table()
     pred, tc = None, None

@@ -36,6 +36,7 @@ from pmpjax.internal import (
     is_concrete,
     pytree_dataclass,
     to_jax,
+    warn_without_x64,
 )
 
 
@@ -83,6 +84,7 @@ def least_squares(
     """
     if not callable(residual):
         raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
+    warn_without_x64()
     x0 = to_jax(as_array("x0", x0), dtype=jnp.result_type(float))
     if x0.ndim != 1:
         raise ValueError(f"`x0` must be a 1-D parameter vector, got shape {x0.shape}")

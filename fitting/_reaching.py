@@ -50,12 +50,17 @@ the other inside it by ``lax.map``, so each runs its own number of iterations). 
 the arm; implicit gradients), by ``fitting.least_squares`` (Levenberg–Marquardt). Stage 2 starts
 there and fits every parameter to the residual ``[(q_sim − q_obs)(s_k) / √49, k = 1..49;
 (q_sim − q_obs)(1)]`` per motion [rad]: time-normalised joint trajectories through
-``pmpjax.simulate`` (RK4, forward-mode derivatives), with the simulated final posture weighted
-once more (the model's final posture is the equilibrium to within the motion left at ``s = 1``).
-The RK4 step count of stage 2 is chosen on the host from the stage-1 parameters (Eq 10 makes the
-task dynamics stiff: the fastest rate is ``cond(B(q0))/τ0``, up to ~3000 per unit normalised
-time for anisotropic ``KJ``), and a motion whose simulation fails or whose fastest rate leaves
-RK4's stability region gives a non-finite residual, so Levenberg–Marquardt rejects that step.
+``pmpjax.simulate`` (forward-mode derivatives), with the simulated final posture weighted once
+more (the model's final posture is the equilibrium to within the motion left at ``s = 1``).
+Eq 10 makes the task dynamics stiff (the fastest rate is ``cond(B(q0))/τ0``, thousands per unit
+normalised time for anisotropic ``KJ``): the solver and its step count are chosen on the host from
+the stage-1 parameters (:func:`_integration`: the L-stable RODAS4 at 2 steps per sample for the
+Arimoto model, RK4 where it is stable and cheaper, as for the time-base generator), and the
+integration error at the optimum (against twice the steps) is checked and reported; above 0.01°
+the step count grows and stage 2 goes on. Both stages hold ``cond(KJ)`` below
+``stiffness_cond_max`` and the shoulder rest angles within the recorded range ± 20° (penalty
+residuals, zero inside; reported when they bind). Converged means a relative cost change below
+1e-8 or every parameter within 0.014 standard errors of the optimum (``stol``).
 Standard errors by ``fitting.covariance``; ``aic``/``bic`` from the Gaussian likelihood of the
 residuals (optimistic: samples of one movement are correlated; use them to rank models fitted to
 the same motions).
@@ -285,7 +290,7 @@ class _Config:
     model: str
     damping: str
     time_constants: str
-    steps: int  # RK4 steps per sample interval (1/49 of normalised time)
+    steps: int  # least RK4 steps per sample interval (1/49 of normalised time) for accuracy
     ftol: float = 1e-8
     xtol: float = 1e-8
     cond_max: float = STIFFNESS_COND_MAX  # bound on cond(KJ) (inf: none)
@@ -785,8 +790,7 @@ class ReachingPrediction:
     ``final_error_donders_deg`` (N,) the same final-posture error of the fitted model's Donders
     prediction, its equilibrium posture at the target (``pmpjax.equilibrium_posture``, Newton
     started at the recorded final posture as stage 1 of the fit does; NaN where it does not
-    converge), which needs no simulation: it stays defined where Eq 10's gain makes the movement
-    too stiff for RK4 (``status`` ``SINGULAR``); ``duration``,
+    converge), which needs no simulation; ``duration``,
     ``recording`` (N,) [s]; ``baselines[name]`` a :class:`BaselinePrediction` for each of
     ``BASELINES``; ``model``, ``damping``, ``time_constants`` of the fit; ``skipped`` and
     ``problems`` as in :class:`ReachingFit`.
@@ -930,7 +934,7 @@ def fit_reaching(
       in the paper).
     - ``solver`` ("rk4", "rodas4") and ``steps_per_sample`` (steps per 1/49 of normalised time) of
       stage 2: chosen from the stage-1 parameters when None (``_integration``: Eq 10's gain makes
-      the Arimoto model stiff, so RODAS4 at 3 steps; the time-base generator RK4 at 2), and the
+      the Arimoto model stiff, so RODAS4 at 2 steps; the time-base generator RK4 at 2), and the
       step count doubled while the integration error at the optimum exceeds 0.01°. The result
       says what was used (``solver``, ``steps_per_sample``, ``integration_error_deg``).
     - ``stiffness_cond_max``: bound on cond(KJ) (None: no bound). Final postures alone leave
@@ -1241,6 +1245,16 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
         "joint_minjerk_oracle": pack(qo, xo, np.zeros(N, int)),
     }
     main = pack(qm, xm, sm)
+    for name in dict.fromkeys(subject.tolist()):  # failed simulations are counted, never silent
+        bad = (subject == name) & (main.status != 0)
+        if bad.any():
+            codes = ", ".join(f"{int(c)}× {Status(int(k)).name}" for k, c in zip(*np.unique(main.status[bad],
+                                                                                        return_counts=True)))
+            problems[name] = (f"{name}: the fitted model failed on {int(bad.sum())} of {int((subject == name).sum())} "
+                              f"held-out motions ({codes}; NaN errors, left out of the summaries)")
+    if any(p_ in problems and p_ not in fit.problems for p_ in dict.fromkeys(subject.tolist())):
+        warnings.warn("predict_reaching: " + "; ".join(problems[p_] for p_ in dict.fromkeys(subject.tolist())
+                                                        if p_ in problems), stacklevel=2)
     # Donders' law of the fitted model: its equilibrium posture at each target, Newton started at
     # the recorded final posture as in stage 1 (from the start posture it fails for ~1 in 5 motions)
     eq = pj.equilibrium_posture(chain, fit.KJ[owner], fit.q_rest[owner], x_obs[:, -1], q_init=q_obs[:, -1])

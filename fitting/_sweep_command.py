@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, read_config
+from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, output_dir, read_config
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
@@ -191,7 +191,7 @@ def build_sweep(path):
     import pmpjax as pj
 
     cfg = read_config(path)
-    model, planner, q0, targets, opt = build_simulation(cfg, path)
+    model, planner, q0, targets, opt = build_simulation(cfg, path, extra_tables=("sweep",))
     chain, n = model.chain, model.chain.n
     mtype = cfg.get("model", {}).get("type", "lambda0")
     ptype = cfg.get("planner", {}).get("type", "arimoto")
@@ -293,7 +293,7 @@ def run_sweep_config(path, out=None, *, progress: bool = False) -> dict:
 
     row_fn, params, axes, opt = build_sweep(path)
     out = Path(out or opt["out"] or "out_sweep")
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     res = sweep(row_fn, params, chunk_size=opt["chunk_size"], out=out / "store", progress=progress)
     names, metrics = opt["names"], opt["metrics"]
     N = len(res.status)

@@ -66,7 +66,8 @@ class TimeConstantFit:
     (…, 2) standard errors of (τ0, τ) [s]; ``loss`` (…) ½|r|² at the optimum; ``rms`` (…) RMS
     residual; ``steps`` (…) LM iterations; ``status`` (…) int (``pmpjax.Status``: SUCCESSFUL,
     MAX_STEPS, NONFINITE, TOO_FEW_DATA for items without data); ``converged`` = status == 0;
-    ``subjects``, ``labels``, ``per_target``.
+    ``subjects``, ``labels``, ``per_target``; ``solver`` of the simulations (``"rk4"``, or the
+    L-stable ``"rodas4"`` when RK4 at the fit's step would be unstable at the start).
     """
 
     subjects: tuple
@@ -82,19 +83,21 @@ class TimeConstantFit:
     status: np.ndarray
     converged: np.ndarray
     per_target: bool
+    solver: str = "rk4"
 
 
-def path_residual(r0, r, KJ, q_rest, data, *, threshold, n_samples, radius, d, J, span=FIT_SPAN, dt=FIT_DT):
+def path_residual(r0, r, KJ, q_rest, data, *, threshold, n_samples, radius, d, J, span=FIT_SPAN, dt=FIT_DT,
+                  solver="rk4"):
     """Residual (M·(3n + 1),) of M movements of one subject for time constants ``r0``, ``r`` (M,)
     in units of each movement's T (module docstring). ``data``: dict of ``q0`` (M, 3), ``target``
     (M, 2), ``T`` (M,), ``half`` (M,), ``bandwidth`` (M,) of the analysis' smoothing in units
     of T (``J`` grid steps each side), ``w`` (M,) weights (0 for cells without data),
-    ``mean_path`` (M, n, 2), ``mean_speed`` (M, n). Differentiable in ``r0``, ``r``, ``KJ``
-    (3, 3), ``q_rest`` (3,)."""
+    ``mean_path`` (M, n, 2), ``mean_speed`` (M, n); ``solver`` of ``pmpjax.simulate``.
+    Differentiable in ``r0``, ``r``, ``KJ`` (3, 3), ``q_rest`` (3,)."""
     M = data["q0"].shape[0]
     KJb = jnp.broadcast_to(KJ, (M, 3, 3))
     tr = normalised_movements(KJb, jnp.broadcast_to(q_rest, (M, 3)), r0, r, data["q0"], data["target"],
-                              span=span, dt=dt, d=d, pad=False)
+                              span=span, dt=dt, d=d, pad=False, solver=solver)
     prof = _profiles(tr, data["T"], data["half"], data["bandwidth"], h=dt, J=J, threshold=threshold,
                      n_samples=n_samples, radius=radius, joints=False)
     w = data["w"]
@@ -119,6 +122,30 @@ def _fit_items(theta0, KJ, q_rest, data, *, opts, max_steps):
         return res, se
 
     return jax.vmap(one)(theta0, KJ, q_rest, data)
+
+
+def _solver(KJ, q_rest, tau0, tau, data, d) -> str:
+    """``"rk4"`` when RK4 at ``FIT_DT`` is stable for every movement at the starting time constants
+    ``tau0``, ``tau`` (items,) [s] (``data`` as :func:`_item_data`'s), else the L-stable
+    ``"rodas4"`` (Eq 10's gain at anisotropic stiffness: ``pmpjax.simulate``)."""
+    from pmpjax import ArimotoPlanner, Lambda0PMP
+    from pmpjax.internal import check_rk4_stability
+
+    M = data["q0"].shape[1]
+    T = np.asarray(data["T"], float).reshape(-1)
+    ok = np.isfinite(T) & (T > 0) & np.all(np.isfinite(np.asarray(data["q0"]).reshape(-1, 3)), -1)
+    flat = lambda a: np.repeat(np.asarray(a), M, axis=0)[ok]  # noqa: E731
+    K = flat(KJ)
+    r0, r = flat(tau0) / T[ok], flat(tau) / T[ok]
+    model = Lambda0PMP(Wrist(d), KJ=K, q_rest=flat(q_rest), W=r0[:, None, None] * K)
+    try:
+        check_rk4_stability(model, ArimotoPlanner(k=None, tau=r, tau0=r0), data["q0"].reshape(-1, 3)[ok],
+                            (int(ok.sum()),), FIT_DT)
+    except ValueError as e:
+        if "too large for RK4" not in str(e):
+            raise
+        return "rodas4"
+    return "rk4"
 
 
 def _item_data(analysis, KJ, q_rest, per_target):
@@ -164,8 +191,9 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     data, KJi, qri, Tbar, has, J = _item_data(analysis, KJ, q_rest, per_target)
     S, L = analysis.T.shape
     theta0 = np.log(np.stack([Tbar / 5.0, Tbar / 5.0], -1))
+    solver = _solver(KJi, qri, np.exp(theta0[:, 0]), np.exp(theta0[:, 1]), data, analysis.d)
     opts = (("threshold", analysis.threshold), ("n_samples", analysis.mean_path.shape[2]),
-            ("radius", analysis.radius), ("d", analysis.d), ("J", J))
+            ("radius", analysis.radius), ("d", analysis.d), ("J", J), ("solver", solver))
     res, se_log = jax.device_get(_fit_items(theta0, KJi, qri, {k: jnp.asarray(v) for k, v in data.items()},
                                             opts=opts, max_steps=int(max_steps)))
     tau = np.exp(res.x)
@@ -185,6 +213,7 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
         tau_movement=mov(tau_i), stderr=stderr.reshape(shape + (2,)), loss=loss.reshape(shape),
         rms=np.sqrt(2 * loss / n_res).reshape(shape), steps=np.asarray(res.steps).reshape(shape),
         status=status.reshape(shape), converged=(status == 0).reshape(shape), per_target=per_target,
+        solver=dict(opts)["solver"],
     )
 
 
@@ -200,7 +229,8 @@ class PointingModelFit:
     ``stderr`` (S, 10) its Gauss–Newton standard errors; ``loss`` (S,) ½|r|² of the weighted
     residual; ``torsion_rms`` (S,) [rad] of the Donders postures; ``path_rms`` (S,) RMS of the
     path residual (dimensionless, as in :func:`fit_time_constants`); ``weights`` (S, 2) the block
-    weights ``1/σ`` (torsion, paths); ``steps``, ``status``, ``converged`` as elsewhere.
+    weights ``1/σ`` (torsion, paths); ``steps``, ``status``, ``converged``, ``solver`` as in
+    :class:`TimeConstantFit`.
     """
 
     subjects: tuple
@@ -218,6 +248,7 @@ class PointingModelFit:
     status: np.ndarray
     converged: np.ndarray
     param_names: tuple
+    solver: str = "rk4"
 
 
 JOINT_PARAMS = ("logK[PS,PS]", "logK[FE,FE]", "logK[PS,FE]", "logK[PS,RUD]", "logK[FE,RUD]", "q_rest[PS]",
@@ -292,7 +323,8 @@ def _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau):
     theta0 = np.concatenate([params_from_stiffness(KJ), q_rest, np.log(t0)[:, None], np.log(t1)[:, None]], -1)
     jdata = dict(x=x, q_obs=q_obs, w_obs=w_obs, weights=weights, paths=data)
     opts = (("threshold", analysis.threshold), ("n_samples", analysis.mean_path.shape[2]),
-            ("radius", analysis.radius), ("d", analysis.d), ("J", J))
+            ("radius", analysis.radius), ("d", analysis.d), ("J", J), ("solver", _solver(KJ, q_rest, t0, t1, data,
+                                                                                        analysis.d)))
     return theta0, jdata, opts, has, Np
 
 
@@ -332,5 +364,5 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
         subjects=analysis.subjects, KJ=KJf, q_rest=x[:, 5:8], tau0=np.exp(x[:, 8]), tau=np.exp(x[:, 9]), params=x,
         stderr=np.asarray(se), loss=np.asarray(res.cost), torsion_rms=np.sqrt(np.sum(r_t**2, 1) / n_t),
         path_rms=np.sqrt(np.mean(r_p**2, 1)), weights=w, steps=np.asarray(res.steps), status=status,
-        converged=status == 0, param_names=JOINT_PARAMS,
+        converged=status == 0, param_names=JOINT_PARAMS, solver=dict(opts)["solver"],
     )

@@ -39,6 +39,8 @@ import traceback
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ._base.validate import output_dir
+
 #: Order of the parts in a run and in the report (others follow alphabetically).
 PART_ORDER = (
     "figure3", "donders_nio", "pointing", "ik_figures", "ik_synthetic", "ik_hugmp",
@@ -291,7 +293,7 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     if unknown:
         raise ValueError(f"unknown part(s) {unknown}; available: {list(parts)}")
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     results_path = out / "results.json"
     results = json.loads(results_path.read_text()) if results_path.exists() else {}
     meta = results.setdefault("_meta", {})
@@ -782,7 +784,12 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     commands = set(parser._subparsers._group_actions[0].choices)  # noqa: SLF001
-    if not argv or (argv[0] not in commands and argv[0] not in ("-h", "--help")):
+    if not argv:  # a bare `pmpjax` says what it can do rather than start a long run in the current folder
+        parser.print_help(sys.stderr)
+        print("\npmpjax: give a command, or run the main job with `pmpjax --out DIR` (= pmpjax reproduce --out DIR)",
+              file=sys.stderr)
+        return 2
+    if argv[0] not in commands and argv[0] not in ("-h", "--help"):
         argv = ["reproduce", *argv]  # `pmpjax --out out` is `pmpjax reproduce --out out`
     args = parser.parse_args(argv)
     try:

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._base.validate import check_spd
+from ._base.validate import check_spd, input_file, output_dir, read_text_file
 
 
 class ConfigError(ValueError):
@@ -44,10 +44,8 @@ class ConfigError(ValueError):
 
 def read_config(path) -> dict:
     """Parse a TOML (``.toml``) or JSON (``.json``) file; syntax errors name line and column."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    text = path.read_text()
+    path = input_file("config", path)
+    text = read_text_file(path)
     try:
         if path.suffix.lower() == ".json":
             return json.loads(text)
@@ -81,9 +79,41 @@ def _array(path, name, value, shape=None):
     return a
 
 
-def build_simulation(cfg: dict, path="<config>"):
+#: The keys each table of a simulation configuration may hold (``[sweep]`` is the sweep command's).
+KNOWN_KEYS = {
+    "chain": {"type", "d", "lengths"},
+    "model": {"type", "KJ", "KJ_diag", "q_rest", "q_rest_deg", "W", "tau0"},
+    "planner": {"type", "k", "tau", "duration"},
+    "simulation": {"duration", "dt", "q0", "q0_deg", "targets", "save_every"},
+}
+
+
+def check_keys(cfg: dict, path, extra_tables=()) -> None:
+    """``ConfigError`` naming the file and the key for an unknown table or key (a typo would
+    otherwise fall back silently to a default)."""
+    import difflib
+
+    for table, sec in cfg.items():
+        if table in extra_tables:
+            continue
+        if table not in KNOWN_KEYS:
+            raise ConfigError(f"{path}: unknown table [{table}]; expected "
+                              f"{', '.join(f'[{t}]' for t in [*KNOWN_KEYS, *extra_tables])}")
+        if not isinstance(sec, dict):
+            raise ConfigError(f"{path}: [{table}] must be a table")
+        for key in sec:
+            if key not in KNOWN_KEYS[table]:
+                near = difflib.get_close_matches(key, KNOWN_KEYS[table], n=1)
+                hint = f" (did you mean {table}.{near[0]}?)" if near else ""
+                raise ConfigError(f"{path}: unknown key {table}.{key}{hint}; [{table}] takes "
+                                  f"{', '.join(sorted(KNOWN_KEYS[table]))}")
+
+
+def build_simulation(cfg: dict, path="<config>", extra_tables=()):
     """``(model, planner, q0, targets, options)`` from a parsed configuration."""
     import pmpjax as pj
+
+    check_keys(cfg, path, extra_tables)
 
     ctype = _get(cfg, path, "chain", "type", "wrist")
     if ctype == "wrist":
@@ -187,7 +217,7 @@ def run_simulation_config(path, out) -> dict:
     cfg = read_config(path)
     model, planner, q0, targets, opt = build_simulation(cfg, path)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir("--out", out)
     try:
         traj = pj.simulate(model, planner, np.broadcast_to(q0, (len(targets), q0.shape[0])), targets,
                            duration=opt["duration"], dt=opt["dt"], saveat=pj.SaveAt(every=opt["every"]))

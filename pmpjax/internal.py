@@ -38,8 +38,12 @@ from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
+from ._base.validate import input_file as input_file
 from ._base.validate import is_concrete as is_concrete
+from ._base.validate import output_dir as output_dir
+from ._base.validate import read_text_file as read_text_file
 from ._base.validate import to_jax as to_jax
+from ._base.validate import warn_without_x64 as warn_without_x64
 
 # Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
 from ._config import ConfigError as ConfigError

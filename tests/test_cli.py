@@ -253,10 +253,15 @@ def test_terminating_the_command_stops_its_worker_processes(tmp_path):
             proc.wait()
 
 
-def test_command_line_bad_input_is_one_line_and_exit_2(capsys):
+def test_command_line_bad_input_is_one_line_and_exit_2(capsys, tmp_path, monkeypatch):
     assert _cli.main(["reproduce", "--only", "no_such_part", "--no-cache"]) == 2
     err = capsys.readouterr().err
     assert "no_such_part" in err and "Traceback" not in err
+    # a bare `pmpjax` prints its usage and starts nothing (no `out/` in the current folder)
+    monkeypatch.chdir(tmp_path)
+    assert _cli.main([]) == 2
+    err = capsys.readouterr().err
+    assert "usage:" in err and "--out DIR" in err and not any(tmp_path.iterdir())
 
 
 def _example(name):

@@ -96,3 +96,43 @@ def test_commands_have_help(capsys):
             _cli.main([command, "--help"])
         assert e.value.code == 0
         assert command in capsys.readouterr().out
+
+
+# Each subcommand that reads a file: its shipped example and how to spoil one column/key of it.
+READERS = [
+    ("fit-donders", "donders_example.csv", ("qw,", "qw_,")),
+    ("analyze-pointing", "pointing_example.csv", ("qw,", "qw_,")),
+    ("ik-weights", "ik_example.csv", ("xdot_1,", "xdot1,")),
+    ("simulate", "simulate_figure3.toml", ("KJ_diag", "KJ_dag")),
+    ("sweep", "sweep_figure3.toml", ("KJ_diag", "KJ_dag")),
+]
+
+
+@pytest.mark.parametrize("command, name, rename", READERS, ids=[r[0] for r in READERS])
+@pytest.mark.parametrize("spoil", ["directory", "empty", "binary", "renamed"])
+def test_every_subcommand_refuses_bad_files_by_name(tmp_path, capsys, command, name, rename, spoil):
+    from pathlib import Path
+
+    good = Path(example(name)).read_text()
+    path = tmp_path / f"spoilt_{name}"
+    if spoil == "directory":
+        path.mkdir()
+    elif spoil == "empty":
+        path.write_text("")
+    elif spoil == "binary":
+        path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe" + bytes(range(256)))
+    else:
+        assert rename[0] in good
+        path.write_text(good.replace(rename[0], rename[1], 1))
+    assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert path.name in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    if spoil == "renamed":
+        assert rename[1].strip(",") in err  # the unknown column or key is named
+
+
+def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "taken").write_text("x")
+    assert _cli.main(["simulate", example("simulate_figure3.toml"), "--out", str(tmp_path / "taken")]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "taken" in err and "not a folder" in err and "Traceback" not in err

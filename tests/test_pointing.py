@@ -56,7 +56,8 @@ def test_pointing_format_round_trips_and_reads_hand_written_files(tmp_path, rng)
         lines.append(f"{g},{i * 7},{t}," + ",".join(repr(float(v)) for v in qq) + f",s1,{trial}")
     path = tmp_path / "hand.csv"
     path.write_text("\n".join(lines) + "\n")
-    rec = pj.read_pointing(path)
+    with pytest.warns(UserWarning, match=r"hand.csv:3: column\(s\) \['extra'\] ignored"):
+        rec = pj.read_pointing(path)
     assert rec.d == 0.8 and rec.trials("s1") == (1, 2)
     np.testing.assert_array_equal(rec.rows("s1", 2), [1, 3])
     np.testing.assert_array_equal(rec.target, ["C", "N", "N", "C"])
@@ -484,7 +485,7 @@ def test_time_constants_recover_the_generating_values(analysis, experiment):
     ex, _ = experiment
     tr = ex.truth
     tc = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"])
-    assert tc.converged.all() and tc.tau0.shape == (2,)
+    assert tc.converged.all() and tc.tau0.shape == (2,) and tc.solver == "rk4"
     # Generated with τ0 = 0.3 T, τ = 0.12 T (one T per subject), not the paper's T/5.
     np.testing.assert_allclose(tc.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(tc.tau, tr["tau"][:, 0], rtol=0.05)
@@ -495,6 +496,29 @@ def test_time_constants_recover_the_generating_values(analysis, experiment):
     err0 = np.abs(pt.tau0[ok] / tr["tau0"][ok] - 1)
     err = np.abs(pt.tau[ok] / tr["tau"][ok] - 1)
     assert np.median(err0) < 0.05 and np.median(err) < 0.08 and err0.max() < 0.2 and err.max() < 0.3
+
+
+def test_time_constant_fits_take_the_stiff_solver_where_rk4_is_unstable(analysis, experiment):
+    # Eq 10's gain at anisotropic stiffness (cond 1e3): RK4 at the fits' step would diverge, so the
+    # fit simulates with RODAS4 and says so; at the subjects' own stiffness RK4 is stable.
+    from fitting._time_constants import FIT_DT, _item_data, _solver
+
+    ex, _ = experiment
+    Q, _ = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
+    stiff = Q @ np.diag(4 * np.array([1.0, 30.0, 1000.0]) / 1031.0) @ Q.T
+    for KJ, expect in ((ex.truth["KJ"], "rk4"), (np.broadcast_to(stiff, (2, 3, 3)), "rodas4")):
+        data, KJi, qri, Tbar, _, _ = _item_data(analysis, np.asarray(KJ), ex.truth["q_rest"], False)
+        assert _solver(KJi, qri, Tbar / 5, Tbar / 5, data, analysis.d) == expect
+    # the stiff case's fastest rate by hand (Eq 10: k λ_max(M) = cond(M)/τ0, τ0 = T̄/5 in units of
+    # each movement's T): beyond RK4's stability bound at FIT_DT (2.78 on the real axis; 2.5 checked)
+    rates = []
+    for s, (q0s, Ts) in enumerate(zip(data["q0"], data["T"])):
+        for q0, T in zip(q0s, Ts):
+            if np.isfinite(T) and T > 0:
+                J = np.asarray(pj.Wrist(analysis.d).jacobian(q0))
+                lam = np.linalg.eigvalsh(J @ np.linalg.inv(stiff) @ J.T)
+                rates.append(lam[-1] / lam[0] / (Tbar[s] / 5 / T))
+    assert max(rates) * FIT_DT > 2.5
 
 
 def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, experiment):

@@ -425,6 +425,9 @@ def test_bad_input(folders, clean_fit):
         (dict(subjects=[2], time_constants="free"), ValueError, "`time_constants`"),
         (dict(subjects=[2], max_steps=(0, 3)), ValueError, "`max_steps`"),
         (dict(subjects=[2], steps_per_sample=0), ValueError, "`steps_per_sample`"),
+        (dict(subjects=[2], steps_per_sample=2.5), ValueError, "`steps_per_sample`"),
+        (dict(subjects=[2], solver="euler"), ValueError, "`solver`"),
+        (dict(subjects=[2], stiffness_cond_max=1.0), ValueError, "`stiffness_cond_max`"),
         (dict(subjects=[2], directory=bad / "nowhere"), ValueError, "`directory`"),
         (dict(subjects=[7], directory=bad), ValueError, "S07_trajs.mat"),  # missing file
         (dict(subjects=[6], directory=bad), ValueError, "S06_trajs.mat.*not a MATLAB"),  # malformed
@@ -454,6 +457,28 @@ def test_bad_input(folders, clean_fit):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a clean fit warns about nothing
         fitting.fit_reaching([2], directory=folders["clean"], **SMALL)
+
+
+def test_stiffness_bound_holds_and_is_reported(folders):
+    # Stage 1 (final postures) of S02, tasks 1-2: without a bound cond(KJ) goes to ~40; a bound of
+    # 1.2 must hold (to the penalty's ~1 % slack) and be reported as binding. cond(KJ) from NumPy.
+    opts = dict(SMALL, tasks=(1, 2), max_steps=(40, 0), directory=folders["clean"])
+    free = fitting.fit_reaching([2], stiffness_cond_max=None, **opts)
+    tight = fitting.fit_reaching([2], stiffness_cond_max=1.2, **opts)
+    cond = lambda K: np.linalg.eigvalsh(K)[-1] / np.linalg.eigvalsh(K)[0]  # noqa: E731
+    assert cond(free.KJ[0]) > 10 and not free.bound_active[0, 0]
+    assert 1.2 * 0.99 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
+    assert tight.stiffness_cond[0] == pytest.approx(cond(tight.KJ[0])) and tight.stiffness_cond_max == 1.2
+    # the rest-angle bounds: the subject's recorded range widened by REST_MARGIN_DEG, held likewise
+    m = R._motions(2, folders["clean"], SMALL["reps"], (1, 2))
+    lo = m.q_obs[..., :3].min((0, 1)) - np.deg2rad(R.REST_MARGIN_DEG)
+    hi = m.q_obs[..., :3].max((0, 1)) + np.deg2rad(R.REST_MARGIN_DEG)
+    slack = np.deg2rad(0.5)
+    for f in (free, tight):
+        q = f.q_rest[0, :3]
+        assert np.all((q > lo - slack) & (q < hi + slack))
+        assert np.array_equal(f.bound_active[0, 1:], (q <= lo) | (q >= hi))
+    assert free.bound_active[0, 1:].any()  # this subject presses against one
 
 
 def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fit):

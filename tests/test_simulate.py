@@ -358,3 +358,21 @@ def test_folded_forward_jacobians_match_central_differences():
         e[:, i] = 1e-6
         fd = (np.asarray(f(thetas + e, targets)) - np.asarray(f(thetas - e, targets))) / 2e-6
         np.testing.assert_allclose(J[..., i], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_float32_runs_warn_once_and_x64_runs_do_not(tmp_path):
+    # Without jax_enable_x64 JAX computes in float32: the first simulate/fit says so, once.
+    import subprocess
+    import sys
+
+    code = ("import warnings, numpy as np, pmpjax as pj\n"
+            "m = pj.Lambda0PMP(pj.Wrist(), KJ=np.eye(3), q_rest=np.zeros(3), W=0.1 * np.eye(3))\n"
+            "with warnings.catch_warnings(record=True) as w:\n"
+            "    warnings.simplefilter('always')\n"
+            "    for _ in range(2):\n"
+            "        t = pj.simulate(m, pj.ConstantPlanner(5.0), np.zeros(3), np.array([0.1, 0.0]), duration=0.02)\n"
+            "print(t.q.dtype, sum('float32' in str(x.message) for x in w))\n")
+    for x64, expect in (("0", "float32 1"), ("1", "float64 0")):
+        env = {**__import__("os").environ, "JAX_ENABLE_X64": x64}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        assert out.stdout.split() == expect.split(), out.stderr[-2000:]

@@ -202,3 +202,4 @@ def test_pivoted_lu_matches_lapack(rng):
         x = np.stack(lu_solve_lists(lu, [jnp.asarray(b[i]) for i in range(m)]))
         ref = np.stack([np.linalg.solve(A[..., k], b[:, k]) for k in range(9)], -1)
         np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-12)
+

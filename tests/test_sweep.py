@@ -369,3 +369,16 @@ def test_sweep_bad_input_raises_before_any_work(tmp_path):
     (junk / "notes.txt").write_text("mine")
     with pytest.raises(ValueError, match="non-empty directory without a sweep manifest"):
         fitting.sweep(tiny, PARAMS, chunk_size=6, out=junk, progress=False)
+
+
+def test_donders_power_rows_report_the_fits_status_codes():
+    # The power-analysis rows carry fitting's Status codes as the fit returns them: one LM step
+    # cannot have converged (MAX_STEPS), 3 postures cannot determine 8 parameters (TOO_FEW_DATA).
+    from functools import partial
+
+    from fitting._sweep_examples import donders_power_row
+
+    rows = dict(logK=jnp.zeros((2, 5)), q_rest=jnp.zeros((2, 3)), n_postures=jnp.array([40, 3]),
+                noise_deg=jnp.array([0.5, 0.5]), seed=jnp.array([0, 1]))
+    out = jax.jit(jax.vmap(partial(donders_power_row, n_max=40, n_starts=1, max_steps=1)))(rows)
+    assert [int(s) for s in out["status"]] == [int(pj.Status.MAX_STEPS), int(pj.Status.TOO_FEW_DATA)]

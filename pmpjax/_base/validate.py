@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -11,6 +13,21 @@ import numpy as np
 def is_concrete(*xs: Any) -> bool:
     """True when no leaf is a JAX tracer (so values can be inspected in Python)."""
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(xs))
+
+
+_X64_WARNED = []
+
+
+def warn_without_x64() -> None:
+    """Warn once per process when JAX computes in float32 (``jax_enable_x64`` off): the science
+    here needs double precision, and without it results come back silently as float32."""
+    if not jax.config.jax_enable_x64 and not _X64_WARNED:
+        _X64_WARNED.append(True)
+        import warnings
+
+        warnings.warn("pmpjax: JAX runs in float32 (jax_enable_x64 is off): results lose precision. Turn it on "
+                      "before creating arrays: jax.config.update('jax_enable_x64', True) or JAX_ENABLE_X64=1",
+                      UserWarning, stacklevel=3)
 
 
 def to_jax(x: Any, dtype=None):
@@ -124,3 +141,51 @@ def csv_floats(path, line: int, row, columns: dict, names) -> list[float]:
             raise ValueError(f"{path}: line {line}, column {i + 1} ({name}): NaN or inf")
         out.append(v)
     return out
+
+
+def as_path(name: str, path) -> Path:
+    """``path`` as a ``Path``; ``TypeError`` naming ``name`` for anything but a str or os.PathLike."""
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"`{name}` must be a path (str or os.PathLike), got {type(path).__name__}")
+    return Path(path)
+
+
+class MissingFileError(FileNotFoundError, ValueError):
+    """A file that is not there: both a ``FileNotFoundError`` and a ``ValueError`` (bad input)."""
+
+
+def input_file(name: str, path) -> Path:
+    """``path`` of an existing, non-empty regular file, else a ``ValueError`` naming the file
+    (no such file, a directory, empty); ``TypeError`` naming ``name`` for a non-path."""
+    path = as_path(name, path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a directory, not a file")
+    if not path.is_file():
+        raise MissingFileError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise ValueError(f"{path}: empty file")
+    return path
+
+
+def read_text_file(path: Path) -> str:
+    """The UTF-8 text of ``path``; ``ValueError`` naming the file and the offending byte otherwise
+    (a binary file given where text is expected)."""
+    data = path.read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[: e.start].count(b"\n") + 1
+        raise ValueError(f"{path}: not a UTF-8 text file (line {line}, byte {e.start}: {data[e.start:e.start + 1]!r}; "
+                         "binary data?)") from None
+
+
+def output_dir(name: str, path) -> Path:
+    """The folder ``path``, created if missing; ``ValueError`` naming ``name`` when it is a file."""
+    path = as_path(name, path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"`{name}`: {path} is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"`{name}`: cannot create the folder {path} ({e.strerror})") from None
+    return path

@@ -25,8 +25,8 @@ import numpy as np
 
 from .._base.batching import bucket, pad_rows
 from .._base.compile import fast_compile_jit
-from .._base.validate import check_positive_int
-from .matlab import _as_path, mat_version
+from .._base.validate import as_path, check_positive_int
+from .matlab import mat_version
 
 HUGMP_TASKS = {
     1: ("R", "1", "12", "R", "4", "9", "R"),
@@ -54,7 +54,7 @@ class HugmpSubject:
 def hugmp_directory(directory=None) -> Path:
     """The HuG-MP directory: ``directory``, else ``$PMPJAX_HUGMP``, else the bundled copy."""
     if directory is not None:
-        return _as_path("directory", directory)
+        return as_path("directory", directory)
     env = os.environ.get("PMPJAX_HUGMP")
     if env:
         return Path(env)

@@ -32,22 +32,17 @@ samples-first ((S, n), (S, n), (S, m), (S, m, n)).
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 
+from .._base.validate import as_path, input_file
+
 _MAT73_HEADER = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: pmpjax HDF5 schema 1.00 ."
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}\Z")
 # numeric MATLAB classes stored as plain HDF5 datasets in v7.3 files
 _NUMERIC = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64"}
-
-
-def _as_path(name, path) -> Path:
-    if not isinstance(path, str | os.PathLike):
-        raise TypeError(f"`{name}` must be a path (str or os.PathLike), got {type(path).__name__}")
-    return Path(path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -140,12 +135,10 @@ def read_mat(path) -> dict:
 
     Structs -> dicts, cells and struct arrays -> lists (column-major order), char -> str, numeric
     arrays squeezed (as ``scipy.io.loadmat(simplify_cells=True)``), for both versions.
-    Raises ``FileNotFoundError`` or ``ValueError`` (not a MAT-file, unreadable, unsupported
-    content) naming the file and, where it applies, the variable (``data{2}.Natural.Target1{3}.dq``).
+    Raises ``ValueError`` (no such file, a directory, empty, not a MAT-file, unreadable,
+    unsupported content) naming the file and, where it applies, the variable (``data{2}.Natural.Target1{3}.dq``).
     """
-    path = _as_path("path", path)
-    if not path.is_file():
-        raise FileNotFoundError(f"MAT-file not found: {path}")
+    path = input_file("path", path)
     version = mat_version(path)
     try:
         if version == "5":
@@ -238,7 +231,7 @@ def write_mat(path, variables: dict, *, version: str = "5") -> None:
     Raises ``ValueError``/``TypeError`` naming the variable or field that cannot be written, and
     ``FileNotFoundError`` when the target directory does not exist.
     """
-    path = _as_path("path", path)
+    path = as_path("path", path)
     if version not in ("5", "7.3"):
         raise ValueError(f"`version` must be '5' or '7.3', got {version!r}")
     if not isinstance(variables, dict) or not variables:
@@ -315,7 +308,7 @@ def write_ik_dataset(path, dataset: dict, *, version: str = "5") -> None:
     Raises ``ValueError`` naming the participant, condition, target, trial and field of any
     malformed entry.
     """
-    path = _as_path("path", path)
+    path = as_path("path", path)
     if version not in ("5", "7.3"):
         raise ValueError(f"`version` must be '5' or '7.3', got {version!r}")
     parts_in = _participants(dataset)
@@ -398,7 +391,7 @@ def load_ik_dataset(path) -> dict:
     ``ValueError`` naming the file, participant, condition, target, trial and field
     of any malformed entry.
     """
-    path = _as_path("path", path)
+    path = as_path("path", path)
     raw = read_mat(path)
     if "data" not in raw:
         raise ValueError(f"{path}: no variable `data` (found {sorted(raw)})")

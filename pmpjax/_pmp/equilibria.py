@@ -38,7 +38,15 @@ from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, check_spd, is_concrete, to_jax
+from .._base.validate import (
+    as_array,
+    check_positive,
+    check_positive_int,
+    check_spd,
+    is_concrete,
+    to_jax,
+    warn_without_x64,
+)
 from .._chains.kinematics import Chain
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
@@ -213,6 +221,7 @@ def equilibrium_posture(
         q_init = as_array("q_init", q_init, tail=(n,))
     check_positive("tol", tol)
     check_positive_int("max_iter", max_iter)
+    warn_without_x64()
     batch = broadcast_batch(KJ=(KJ, 2), q_rest=(q_rest, 1), target=(target, 1), q_init=(q_init, 1))
     dtype = jnp.result_type(float)
     q0 = q_rest if q_init is None else q_init

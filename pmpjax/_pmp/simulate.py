@@ -7,6 +7,7 @@ import contextvars
 import dataclasses
 import functools
 import math
+import os
 from functools import partial
 
 import jax
@@ -19,7 +20,7 @@ from .._base.compile import fast_compile_applies, fast_compile_jit, top_level
 from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
-from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax
+from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax, warn_without_x64
 from .._chains.kinematics import manipulability_soa
 from .integrate import SOLVERS, integrate_observed
 from .models import _PMP
@@ -114,6 +115,34 @@ def _schedule(saveat: SaveAt, duration: float, dt: float) -> _Schedule:
     return _Schedule(n_steps, tuple(starts), tuple((ends - starts) / n_steps), bool(include0), tuple(ts))
 
 
+def _available_memory() -> int:
+    """Bytes of memory available to this process (Linux ``MemAvailable``; else physical memory)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (OSError, ValueError, AttributeError):
+        return 1 << 62
+
+
+def _check_output_size(saveat, duration, dt, movements, floats_per_sample):
+    """Refuse (``ValueError`` with the size) a run whose saved trajectory cannot fit in memory."""
+    steps = max(1, math.ceil(duration / dt - 1e-9))
+    samples = 1 if saveat.final else len(saveat.ts) if saveat.ts is not None else steps // (saveat.every or 1) + 1
+    size = float(movements) * samples * floats_per_sample * 8
+    avail = _available_memory()
+    if size > 0.8 * avail:
+        raise ValueError(f"the saved trajectory would take {size / 2**30:.3g} GiB ({movements} movement(s) × "
+                         f"{samples} samples; `duration`={duration:g} s, `dt`={dt:g} s) but {avail / 2**30:.3g} GiB "
+                         "of memory is available: shorten `duration`, save less often (`saveat`) or simulate fewer "
+                         "movements at a time")
+
+
 @partial(fast_compile_jit, static_argnames=("batch",))
 def _rates(model, q0, *, batch):
     """Eigenvalues of ``M = B(q0)⁻¹`` (*batch, m) and the largest |eig| of ``A KJ`` (elastic)."""
@@ -203,6 +232,7 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     if not isinstance(planner, Planner):
         raise TypeError(f"`planner` must be a pmpjax Planner, got {type(planner).__name__}")
     solver = check_solver(solver)
+    warn_without_x64()
     chain = model.chain
     n, m = chain.n, chain.m
     q0 = to_jax(as_array("q0", q0, tail=(n,)), float)
@@ -210,10 +240,12 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     chain.check_target("targets", targets)
     duration = positive_float("duration", duration)
     dt = positive_float("dt", dt)
-    sched = _schedule(saveat or SaveAt(), duration, dt)
+    saveat = saveat or SaveAt()
     batch = tuple(
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
+    _check_output_size(saveat, duration, dt, math.prod(batch) * targets.shape[-2], 2 * (n + m) + 1)
+    sched = _schedule(saveat, duration, dt)
     if is_concrete(model, planner, q0):
         check_rk4_stability(model, planner, q0, batch, max(sched.hs) if solver == "rk4" else None)
     # Equal step sizes (every mode but unequal `ts`) become a compile-time constant.

@@ -35,7 +35,16 @@ import os
 
 import numpy as np
 
-from .._base.validate import as_array, check_finite_masked, check_positive, check_positive_int, check_spd, csv_floats
+from .._base.validate import (
+    as_array,
+    check_finite_masked,
+    check_positive,
+    check_positive_int,
+    check_spd,
+    csv_floats,
+    input_file,
+    read_text_file,
+)
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .donders import SCREEN_HALF_ANGLE_DEG
@@ -214,9 +223,7 @@ def write_recordings(path, rec: DondersRecording) -> None:
 
 def read_recordings(path) -> DondersRecording:
     """Read a recording written by :func:`write_recordings` or by hand in the same format."""
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise ValueError(f"`path`: no such file {path!r}")
+    path = os.fspath(input_file("path", path))
     if path.endswith(".npz"):
         return _read_npz(path)
     if path.endswith(".csv"):
@@ -256,8 +263,7 @@ def _build(path, subjects, quat, pointing, mask, d):
 
 
 def _read_csv(path):
-    with open(path, newline="") as f:
-        text = f.read()
+    text = read_text_file(input_file("path", path))
     d = 1.0
     lines = []
     for ln, line in enumerate(text.splitlines(), 1):
@@ -291,6 +297,11 @@ def _read_csv(path):
             f"{path}: line {lines[0][0]}: header {header} lacks column(s) "
             f"{missing + ([] if has_q or has_j else ['qw,qx,qy,qz or q_ps,q_fe,q_rud'])}"
         )
+    known = {*need, *_QUAT_COLS, *_JOINT_COLS}
+    unknown = [c for c in header if c not in known]
+    if unknown:  # (a renamed column would otherwise be ignored silently)
+        raise ValueError(f"{path}: line {lines[0][0]}: unknown column(s) {unknown}; expected "
+                         f"{', '.join(need)} and {','.join(_QUAT_COLS)} or {','.join(_JOINT_COLS)}")
     if len(rows) == 1:
         raise ValueError(f"{path}: header only, no samples")
     ori_cols = _QUAT_COLS if has_q else _JOINT_COLS

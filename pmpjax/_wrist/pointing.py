@@ -47,7 +47,7 @@ import numpy as np
 from .._base.batching import bucket, head_rows, pad_rows
 from .._base.compile import fast_compile_jit
 from .._base.pytree import replace
-from .._base.validate import check_positive_int, is_concrete
+from .._base.validate import check_positive_int, input_file, is_concrete, read_text_file
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .._pmp.models import Lambda0PMP
@@ -260,8 +260,7 @@ def read_pointing(path, *, on_invalid: str = "raise") -> PointingRecording:
     path = os.fspath(path)
     if on_invalid not in ("raise", "skip"):
         raise ValueError(f"`on_invalid` must be 'raise' or 'skip', got {on_invalid!r}")
-    if not os.path.exists(path):
-        raise ValueError(f"`path`: no such file {path!r}")
+    path = os.fspath(input_file("path", path))
     if path.endswith(".npz"):
         rec = _read_npz(path)
     elif path.endswith(".csv"):
@@ -310,8 +309,7 @@ def _read_npz(path):
 
 
 def _read_csv(path):
-    with open(path, newline="") as f:
-        text = f.read()
+    text = read_text_file(input_file("path", path))
     meta = {"d": 1.0, "radius": float(np.pi / 12)}
     kept, lines = [], []
     for ln, raw in enumerate(text.splitlines(), 1):
@@ -338,6 +336,12 @@ def _read_csv(path):
     missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise ValueError(f"{path}:{lines[0]}: header {header} lacks column(s) {missing}")
+    unknown = [c for c in header if c not in COLUMNS]
+    if unknown:  # (lab exports carry extra columns: read on, but never silently)
+        import warnings
+
+        warnings.warn(f"{path}:{lines[0]}: column(s) {unknown} ignored (the format reads {', '.join(COLUMNS)})",
+                      UserWarning, stacklevel=3)
     if len(rows) == 1:
         raise ValueError(f"{path}: header only, no samples")
     col = {c: header.index(c) for c in COLUMNS}
@@ -396,7 +400,8 @@ class SyntheticPointing:
     truth: dict
 
 
-def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span, dt, d=1.0, pad=True):
+def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span, dt, d=1.0, pad=True,
+                         solver="rk4"):
     """λ0-PMP movements in normalised time ``s = t/T`` (batched; one ``pmpjax.simulate`` call).
 
     With ``W = τ0 KJ`` (Eq 7) and ``k = b_max/τ0`` (Eq 10) every rate of the λ0-PMP is ``1/τ0``
@@ -405,8 +410,9 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
     movements of an experiment, whatever their durations, then share one step count: ``span``
     and ``dt`` are in units of ``T``. Inputs (B, ...) flat; with ``pad`` the batch is padded to a
     power of two (>= 16) so that calls of similar size share one compilation. Works inside
-    ``jit``/``vmap``/``grad`` (the RK4 stability check then does not run). Returns the Trajectory (``t``
-    is ``s``; ``xdot``, ``qdot`` are per unit ``s``: divide by ``T`` for physical rates).
+    ``jit``/``vmap``/``grad`` (the RK4 stability check then does not run). ``solver`` as
+    ``pmpjax.simulate``. Returns the Trajectory (``t`` is ``s``; ``xdot``, ``qdot`` are per unit
+    ``s``: divide by ``T`` for physical rates).
     """
     B = np.shape(q0)[0]
     Bp = bucket(B, minimum=16) if pad else B
@@ -414,7 +420,8 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
     xp = np if is_concrete(*args) else jnp  # (padding concrete inputs in NumPy compiles nothing)
     KJ, q_rest, r0, r, q0, target = (pad_rows(xp.asarray(a, float), Bp) for a in args)
     model = Lambda0PMP(Wrist(d), KJ=KJ, q_rest=q_rest, W=r0[:, None, None] * KJ)
-    tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span), dt=float(dt))
+    tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span), dt=float(dt),
+                  solver=solver)
     return replace(tr, **{k: head_rows(getattr(tr, k), B)
                           for k in ("q", "x", "qdot", "xdot", "manipulability", "status")})
 
