@@ -465,6 +465,7 @@ def table(args):
             with open(base + ".md", "w") as f:
                 f.write(markdown(res) + "\n")
             if args.name == "reaching_table" and set(res["subjects"]) == {f"S{s:02d}" for s in SUBJECTS}:
+                VARIANTS_TABLE.parent.mkdir(exist_ok=True)
                 VARIANTS_TABLE.write_text(json.dumps(variant_summary(res), indent=1) + "\n")
 
     # the Donders-only model (final postures, stage 1 only): the reference of every variant

@@ -28,18 +28,54 @@ RODAS4 ×5 and stable RK4 at the smallest batch (``fits`` rows).
 
 Run: ``python benchmarks/stiff.py`` (≈ 6 min on 2 cores) or ``--quick`` (smoke run, writes nothing).
 
-Results: see the ``Latest figures`` section at the end of this docstring (pasted from a run).
+Latest figures (2026-12-05 13:40–14:03 UTC, 2-core AMD EPYC Zen 4 KVM, no GPU, jax 0.10.2,
+diffrax 0.7.2, SciPy 1.17.1; load 0.2 → 1.7: other work ran beside it in the second half)::
 
-Choice. ``simulate`` keeps RK4 as its default (non-stiff movements: 4 field evaluations per
-step, no Jacobian) and offers RODAS4 as ``solver="rodas4"``: L-stable and stiffly accurate, it
-integrates these movements to within 0.01° of Radau at 3 steps per sample whatever the stiffness,
-with fixed steps (a batch in lockstep, static shapes, samples on the step grid, exact discrete
-derivatives by forward and reverse mode), one Jacobian and LU per step and no Newton iteration.
-diffrax's adaptive ESDIRK solvers reach similar accuracy with fewer steps but cost more per step
-(Newton iterations, adaptive control under ``vmap`` waits for the slowest movement) and add a
-dependency; SciPy's are one movement at a time.
+    | solver | B | steps/movement | max err [deg] | failed | compile [s] | run [s] | per movement [ms] |
+    |---|---:|---:|---:|---:|---:|---:|---:|
+    | pmpjax rodas4 ×2 | 64 | 98 | 1.3e-01 | 0 | 5.0 | 0.011 | 0.174 |
+    | pmpjax rodas4 ×3 | 64 | 147 | 1.4e-02 | 0 | 5.8 | 0.019 | 0.304 |
+    | pmpjax rodas4 ×5 | 64 | 245 | 1.2e-03 | 0 | 4.5 | 0.023 | 0.365 |
+    | pmpjax rk4 (stable) ×4096 | 64 | 200704 | 1.5e-10 | 0 | 1.5 | 5.915 | 92.416 |
+    | diffrax Kvaerno5 | 64 | 1749 | 5.5e-06 | 2 | 15.5 | 8.519 | 133.107 |
+    | diffrax KenCarp4 | 64 | 1350 | 3.2e-04 | 2 | 15.3 | 8.047 | 125.738 |
+    | diffrax Kvaerno5 ×5 | 64 | 1 | nan | 64 | 14.4 | 0.006 | 0.087 |
+    | fits: jacobian rodas4 ×5 | 64 | 245 | nan | 0 | 12.0 | 0.454 | 7.101 |
+    | fits: jacobian rk4 ×4096 | 64 | 200704 | nan | 0 | 5.2 | 119.945 | 1874.136 |
+    | pmpjax rodas4 ×2 | 256 | 98 | 1.3e-01 | 0 | 6.0 | 0.039 | 0.151 |
+    | pmpjax rodas4 ×3 | 256 | 147 | 1.4e-02 | 0 | 3.3 | 0.083 | 0.324 |
+    | pmpjax rodas4 ×5 | 256 | 245 | 1.2e-03 | 0 | 3.3 | 0.084 | 0.330 |
+    | pmpjax rk4 (stable) ×4096 | 256 | 200704 | 1.5e-10 | 0 | 1.5 | 36.796 | 143.736 |
+    | diffrax Kvaerno5 | 256 | 1319 | 5.5e-06 | 4 | 16.6 | 50.303 | 196.495 |
+    | diffrax KenCarp4 | 256 | 908 | 3.2e-04 | 2 | 33.9 | 37.811 | 147.700 |
+    | diffrax Kvaerno5 ×5 | 256 | 1 | nan | 256 | 15.9 | 0.019 | 0.072 |
+    | scipy Radau (rtol 1e-6) | 1 | nan | 2.5e-05 | 0 | 0.0 | 0.177 | 177.160 |
+    | scipy BDF (rtol 1e-6) | 1 | nan | 4.6e-04 | 0 | 0.0 | 0.095 | 94.600 |
 
-Latest figures: (filled in from the run below)
+    RODAS4 ×5 per movement at B = 256 against: RK4 at its stable step 435×, diffrax Kvaerno5 595×,
+    KenCarp4 447×, SciPy Radau 537×, BDF 287×; the fits' Jacobian (12 parameters) 264× RK4's.
+
+What the figures say:
+
+- **Accuracy.** The error against Radau falls with the step as a fourth-order method's should
+  (0.13° → 0.014° → 0.0012° at 2, 3, 5 steps per sample) and does not grow with stiffness; at 5
+  steps per sample it meets the 0.01° target on every movement up to cond(KJ) = 1e4. (The fits
+  pick their step count from the parameters and check the error at the optimum: on the
+  recordings 2 steps give 0.001°.)
+- **RK4** needs 4 096 steps per sample to be stable here (Eq 10's rate reaches ~5e4 per unit
+  time): 400–450× the cost for accuracy nobody needs.
+- **diffrax's ESDIRK solvers** (adaptive, ``vmap``-ed) take 900–1 750 steps per movement with
+  Newton iterations inside each, and 2–4 of the movements hit 20 000 steps without finishing;
+  at RODAS4's fixed step (×5) Kvaerno5's Newton iteration does not converge on any movement —
+  the reason for a linearly implicit method, whose cost per step is fixed.
+- **SciPy** Radau/BDF at rtol 1e-6 take 95–180 ms per movement, one movement at a time.
+
+Choice. ``simulate`` keeps RK4 as its default (non-stiff movements: four field evaluations per
+step, no Jacobian) and offers RODAS4 as ``solver="rodas4"``: L-stable and stiffly accurate, with
+fixed steps (a batch in lockstep, static shapes, samples on the step grid, exact discrete
+derivatives in forward and reverse mode), one Jacobian and LU per step and no Newton iteration.
+It is the fastest here by two to three orders of magnitude at the target accuracy, and adds no
+dependency.
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
@@ -224,6 +260,16 @@ def fit_jacobian_call(prob, solver, steps):
     return pj.fast_compile_jit(jac), args
 
 
+def speedups(rows, big):
+    """``(name, ratio)``: per-movement time of each baseline over RODAS4 ×5's at batch ``big``
+    (SciPy's per movement; baselines that failed on every movement left out)."""
+    ros = next(r["per_movement_ms"] for r in rows if r["B"] == big and r["solver"] == "pmpjax rodas4 ×5")
+    for r in rows:
+        base = r["solver"].startswith(("pmpjax rk4", "diffrax", "scipy")) and r["B"] in (big, 1)
+        if base and r.get("failed", 0) < r["B"]:
+            yield f"rodas4 ×5 speed-up over {r['solver']}, B = {big}", r["per_movement_ms"] / ros
+
+
 def timed(fn, args, repeats):
     t0 = time.perf_counter()
     compiled = fn.lower(*args).compile()
@@ -299,14 +345,7 @@ def main():
     table = "\n".join(lines)
     print(table)
     big = max(batches)
-    per = {r["solver"].split(" ×")[0]: r["per_movement_ms"] for r in rows
-           if r["B"] in (big, 1) and "rodas4 ×" not in r["solver"]}
-    ros = next(r["per_movement_ms"] for r in rows if r["B"] == big and r["solver"] == "pmpjax rodas4 ×5")
-    ratios = {}
-    for base in ("pmpjax rk4 (stable)", "diffrax Kvaerno5", "diffrax KenCarp4", "scipy Radau (rtol 1e-6)",
-                 "scipy BDF (rtol 1e-6)"):
-        if base in per and ros:
-            ratios[f"rodas4 ×5 speed-up over {base}, B = {big}"] = per[base] / ros
+    ratios = dict(speedups(rows, big))
     for k, v in ratios.items():
         print(f"{k}: {v:.1f}x")
     load1 = os.getloadavg()[0]

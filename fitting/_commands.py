@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import csv_floats, input_file, output_dir, read_text_file
+from pmpjax.internal import csv_floats, example_help, input_file, output_dir, read_text_file
 
 
 def _x64():
@@ -36,7 +36,11 @@ def add_fit_donders(sub) -> None:
     p = sub.add_parser(
         "fit-donders", help="fit KJ and q_rest per subject to steady wrist postures (Donders' law, NIO)",
         description="Fit joint stiffness KJ (SPD, trace 4) and rest posture q_rest of every subject in a "
-        "Donders recording (CSV or NPZ, see pmpjax.read_recordings) by nonlinear inverse optimisation.",
+        "Donders recording (CSV or NPZ, see pmpjax.read_recordings) by nonlinear inverse optimisation. "
+        "CSV columns: subject,sample,qw,qx,qy,qz,x1,x2 (the hand-to-world quaternion, scalar first, and the "
+        "screen point [m]) or q_ps,q_fe,q_rud [rad] instead of qw..qz; one row per steady posture; a line "
+        "'# d=<metres>' gives the screen distance.",
+        epilog=example_help("donders_example.csv"),
     )
     p.add_argument("file", help="Donders recording (.csv or .npz)")
     p.add_argument("--out", default="out_donders", help="output folder (default out_donders)")
@@ -154,6 +158,7 @@ def add_ik_weights(sub) -> None:
     p = sub.add_parser(
         "ik-weights", help="estimate IK weights (Khoramshahi et al. 2022, Algorithm 1) from a data file",
         description=read_ik_file.__doc__.split("\n\n")[0].replace("``", "'"),
+        epilog=example_help("ik_example.csv"),
     )
     p.add_argument("file", help=".mat (the paper's layout), .npz or .csv")
     p.add_argument("--gamma", type=float, default=0.6, help="null-space ratio γ in [0, 1] (default 0.6)")
@@ -205,13 +210,20 @@ def add_analyze_pointing(sub) -> None:
         description="Section 2 'Data Analysis' of Tommasino & Campolo (2017) on a pointing recording (CSV or "
         "NPZ, see pmpjax.read_pointing): segmentation at 20 %% of peak speed, curvature A_sum/A_net, "
         "hysteresis, t-tests. With --donders (a Donders recording of the same subjects): KJ and q_rest by "
-        "NIO, every movement predicted with τ = τ0 = T/5, captured counts, and τ0, τ fitted per subject.",
+        "NIO, every movement predicted with τ = τ0 = T/5, captured counts, and τ0, τ fitted per subject. "
+        "CSV columns: subject,trial,time,qw,qx,qy,qz,target, one row per IMU sample (time [s] from the start of "
+        "the trial; the hand-to-world quaternion, scalar first; target C, N, NE, E, SE, S, SW, W or NW, the "
+        "target on screen); lines '# d=<metres>' and '# radius=<metres>' give the screen distance and the "
+        "target radius. The Donders recording: see fit-donders --help.",
+        epilog=example_help("pointing_example.csv"),
     )
     p.add_argument("file", help="pointing recording (.csv or .npz)")
     p.add_argument("--donders", help="Donders recording of the same subjects (.csv or .npz)")
     p.add_argument("--out", default="out_pointing", help="output folder (default out_pointing)")
     p.add_argument("--starts", type=int, default=2, help="LM starts per subject of the Donders fit (default 2)")
     p.add_argument("--no-figures", action="store_true", help="no Figures 5-8")
+    p.add_argument("--skip-invalid", action="store_true",
+                   help="drop trials with invalid samples (listed in excluded.txt) instead of stopping")
     p.set_defaults(func=_analyze_pointing)
 
 
@@ -229,7 +241,10 @@ def _analyze_pointing(args) -> int:
     from ._pointing_plots import plot_pointing_curvature, plot_pointing_joints, plot_pointing_paths, plot_pointing_speed
     from ._time_constants import fit_time_constants
 
-    rec = pj.read_pointing(args.file)
+    try:
+        rec = pj.read_pointing(args.file, on_invalid="skip" if args.skip_invalid else "raise")
+    except ValueError as e:
+        raise ValueError(str(e).replace("pass on_invalid='skip'", "pass --skip-invalid")) from None
     don = pj.read_recordings(args.donders) if args.donders else None
     if don is not None:
         missing = [s for s in rec.subjects if s not in don.subjects]

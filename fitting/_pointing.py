@@ -309,8 +309,18 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
             names = rec.target[rows]
             starts, ends = _epochs(names)
             seen = set()
-            for a, b in zip(starts[1:], ends[1:]):
-                prev, cur = str(names[a - 1]), str(names[a])
+            epochs = [(a, b, str(names[a - 1])) for a, b in zip(starts[1:], ends[1:])]
+            first = str(names[starts[0]])
+            if first != "C":  # a peripheral target already on screen: the hand starts where it rests
+                rest = float(np.linalg.norm(xs[0] - tg["C"]))
+                if rest <= 0.5 * rec.radius:
+                    epochs.insert(0, (starts[0], ends[0], "C"))
+                else:
+                    skip(s, trial, f"out-{first}", f"the trial starts with target {first} on screen and the hand "
+                         f"{rest:.3g} m from the centre (> radius/2): no start target")
+                    seen.add(f"out-{first}")
+            for a, b, prev in epochs:
+                cur = str(names[a])
                 label = _label(prev, cur)
                 if label is None:
                     skip(s, trial, None, f"unexpected target change {prev} -> {cur} at t = {t[a]:.3f} s "

@@ -944,8 +944,11 @@ def fit_reaching(
       shoulder rest angles, hold them (penalty residuals, zero inside; ``bound_active`` reports
       where a bound binds at the optimum).
 
-    **Cost** (2 cores, idle, four subjects, every task, repetitions 1–7, 747 motions): see
-    ``benchmarks/reaching.py``; stage 1 alone (``max_steps=(40, 0)``) takes seconds.
+    **Cost** (2 idle cores, the four bundled subjects, every task, repetitions 1–7, 747 motions,
+    defaults): about 2.5 min with compilation, every subject converged; stage 1 alone
+    (``max_steps=(40, 0)``) takes seconds. Free damping and fitted time constants cost up to
+    three times more (more parameters, more iterations): ``benchmarks/reaching.py`` and its
+    ``--table``.
 
     All subjects are fitted in one compiled call (see the module docstring). A subject whose file
     is missing or malformed, or that has no usable motion, is reported in ``problems`` with

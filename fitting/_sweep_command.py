@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, output_dir, read_config
+from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, example_help, output_dir, read_config
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
@@ -360,7 +360,7 @@ def _plot(path, params, axes, values, metric, names):
 
 def add_sweep(sub) -> None:
     p = sub.add_parser("sweep", help="sweep model/planner parameters of movements described in a TOML/JSON "
-                       "file (chunked, resumable)", description=__doc__,
+                       "file (chunked, resumable)", description=__doc__, epilog=example_help("sweep_figure3.toml"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", help="TOML or JSON file ([chain], [model], [planner], [simulation], [sweep])")
     p.add_argument("--out", help="output folder (default: sweep.out of the file, else out_sweep)")

@@ -13,7 +13,6 @@ from ._chains.kinematics import PlanarArm as PlanarArm
 from ._chains.kinematics import Wrist as Wrist
 from ._chains.kinematics import manipulability as manipulability
 from ._chains.mjcf import MjcfChain as MjcfChain
-from ._chains.shoulder_elbow import Arm4 as Arm4
 from ._chains.shoulder_elbow import ShoulderElbowArm as ShoulderElbowArm
 from ._data.hugmp import HugmpSubject as HugmpSubject
 from ._data.hugmp import hugmp_arrays as hugmp_arrays

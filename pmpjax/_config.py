@@ -38,6 +38,12 @@ import numpy as np
 from ._base.validate import check_spd, input_file, output_dir, read_text_file
 
 
+def example_help(name: str) -> str:
+    """The ``--help`` line pointing to a shipped example file (``pmpjax/data/examples/name``)."""
+    path = Path(__file__).parent / "data" / "examples" / name
+    return f"Example: {path} (copy it to start from your own: cp {path} .)"
+
+
 class ConfigError(ValueError):
     """A configuration file that cannot be used; the message names the file and the key."""
 
@@ -76,6 +82,10 @@ def _array(path, name, value, shape=None):
         raise ConfigError(f"{path}: {name} must have shape {shape}, got {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ConfigError(f"{path}: {name} contains NaN or inf")
+    if name in ("model.q_rest", "simulation.q0") and np.any(np.abs(a) > 2 * np.pi):
+        raise ConfigError(f"{path}: {name} has angles above 2π rad (degrees? use {name}_deg)")
+    if name.endswith("_deg") and np.any(np.abs(a) > 360):
+        raise ConfigError(f"{path}: {name} has angles above 360°")
     return a
 
 
@@ -162,8 +172,9 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
 
     ptype = _get(cfg, path, "planner", "type", "arimoto")
     duration = float(_get(cfg, path, "simulation", "duration", 0.4))
-    if not duration > 0:
-        raise ConfigError(f"{path}: simulation.duration must be positive, got {duration}")
+    if not 0 < duration <= 600:
+        raise ConfigError(f"{path}: simulation.duration must be in (0, 600] s (a movement lasts seconds; "
+                          f"milliseconds?), got {duration}")
     try:
         if ptype == "arimoto":
             k = _get(cfg, path, "planner", "k", None)
@@ -200,8 +211,8 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
                               f"{targets.shape}")
         names = [f"T{i}" for i in range(len(targets))]
     dt = float(sim.get("dt", 1e-3))
-    if not dt > 0:
-        raise ConfigError(f"{path}: simulation.dt must be positive, got {dt}")
+    if not 0 < dt <= duration:
+        raise ConfigError(f"{path}: simulation.dt must be in (0, duration] s, got {dt}")
     every = sim.get("save_every", 10)
     if not (isinstance(every, int) and every >= 1):
         raise ConfigError(f"{path}: simulation.save_every must be a positive integer, got {every!r}")
@@ -252,7 +263,8 @@ def run_simulation_config(path, out) -> dict:
 
 def add_simulate_command(sub) -> None:
     p = sub.add_parser("simulate", help="simulate movements described in a TOML/JSON file",
-                       description=__doc__, formatter_class=__import__("argparse").RawDescriptionHelpFormatter)
+                       description=__doc__, epilog=example_help("simulate_figure3.toml"),
+                       formatter_class=__import__("argparse").RawDescriptionHelpFormatter)
     p.add_argument("config", help="TOML or JSON configuration file")
     p.add_argument("--out", default="out_simulate", help="output folder (default out_simulate)")
 

@@ -48,6 +48,7 @@ from ._base.validate import warn_without_x64 as warn_without_x64
 # Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
 from ._config import ConfigError as ConfigError
 from ._config import build_simulation as build_simulation
+from ._config import example_help as example_help
 from ._config import read_config as read_config
 
 # Data

@@ -46,9 +46,8 @@ def test_figure3_rejects_bad_input():
         pj.plot_figure3({"x": np.zeros(3)})
 
 
-@pytest.mark.bad_input("pj.Arm4", "pj.ShoulderElbowArm")
+@pytest.mark.bad_input("pj.ShoulderElbowArm")
 def test_shoulder_elbow_arm_rejects_bad_lengths():
-    assert pj.Arm4 is pj.ShoulderElbowArm
     with pytest.raises(ValueError, match="L1"):
         pj.ShoulderElbowArm(L1=-0.3)
     with pytest.raises(ValueError, match="L2"):

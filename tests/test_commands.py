@@ -136,3 +136,76 @@ def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
     assert _cli.main(["simulate", example("simulate_figure3.toml"), "--out", str(tmp_path / "taken")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and "taken" in err and "not a folder" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name, old, new, expect", [
+    ("simulate_figure3.toml", "q0_deg = [5, 0, 0]", "q0 = [25, 0, 0]", "above 2π rad.*degrees"),
+    ("simulate_figure3.toml", "duration = 0.4", "duration = 400000", "milliseconds"),
+    ("simulate_figure3.toml", "duration = 0.4", "duration = 1e300", "milliseconds"),
+    ("pointing_example.csv", None, "ms", "milliseconds"),
+    ("donders_example.csv", None, "deg", "degrees"),
+])
+def test_values_in_the_wrong_unit_get_a_hint(tmp_path, capsys, name, old, new, expect):
+    from pathlib import Path
+
+    text = Path(example(name)).read_text()
+    if name == "pointing_example.csv":  # time in milliseconds
+        lines = text.splitlines()
+        i = next(k for k, ln in enumerate(lines) if ln.startswith("subject"))
+        rows = [ln.split(",") for ln in lines[i + 1:]]
+        text = "\n".join(lines[: i + 1] + [",".join(r[:2] + [f"{1000 * float(r[2]):.6g}"] + r[3:]) for r in rows])
+    elif name == "donders_example.csv":  # joint-angle columns in degrees instead of quaternions
+        rec = pj.read_recordings(example(name))
+        q = np.rad2deg(np.asarray(rec.joint_angles))
+        lines = ["subject,sample,q_ps,q_fe,q_rud,x1,x2"]
+        for s, subj in enumerate(rec.subjects):
+            for k in range(int(rec.n_samples[s])):
+                lines.append(f"{subj},{k}," + ",".join(f"{v:.6g}" for v in (*q[s, k], *rec.pointing[s, k])))
+        text = "\n".join(lines)
+    else:
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / f"units_{name}"
+    path.write_text(text + "\n")
+    command = {"simulate_figure3.toml": "simulate", "pointing_example.csv": "analyze-pointing",
+               "donders_example.csv": "fit-donders"}[name]
+    assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert path.name in err and "Traceback" not in err
+    import re
+    assert re.search(expect, err), err
+
+
+def test_every_file_reading_subcommand_names_its_example_and_columns(capsys):
+    import re
+    from pathlib import Path
+
+    for command, name, _ in READERS:
+        with pytest.raises(SystemExit):
+            _cli.main([command, "--help"])
+        out = capsys.readouterr().out
+        shown = re.search(r"Example: (\S+)", out.replace("\n", " "))
+        assert shown and Path(shown.group(1)).name == name and Path(shown.group(1)).is_file(), (command, out)
+        assert "cp " in out
+    for command, columns in (("fit-donders", "subject,sample,qw,qx,qy,qz,x1,x2"),
+                             ("analyze-pointing", "subject,trial,time,qw,qx,qy,qz,target")):
+        with pytest.raises(SystemExit):
+            _cli.main([command, "--help"])
+        assert columns in capsys.readouterr().out.replace("\n", "")
+
+
+def test_analyze_pointing_can_skip_invalid_trials_and_says_so_with_the_option_name(tmp_path, capsys):
+    from pathlib import Path
+
+    lines = Path(example("pointing_example.csv")).read_text().splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("subject")) + 5
+    f = lines[i].split(",")
+    lines[i] = ",".join(f[:3] + ["nan"] + f[4:])  # one NaN sample in trial 1
+    path = tmp_path / "one_bad_trial.csv"
+    path.write_text("\n".join(lines) + "\n")
+    assert _cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "a"), "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert "--skip-invalid" in err and "on_invalid" not in err
+    assert _cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "b"), "--no-figures",
+                      "--skip-invalid"]) == 0
+    assert "trial 1" in (tmp_path / "b" / "excluded.txt").read_text()

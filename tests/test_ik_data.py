@@ -370,7 +370,7 @@ def test_motion_kinematics_closed_forms_and_savgol_filter():
     t = np.arange(N) / fs
     c = np.array([[-0.5, -0.6, -0.2, 0.8], [0.3, -0.4, 0.5, 0.6], [0.2, 0.3, -0.4, -0.2], [-0.1, 0.2, 0.1, 0.05]])
     q, qd_true = _cubic(t, c)
-    qs, qd, xd, J = pj.motion_kinematics(q, pj.Arm4(), fs=fs, samples=None)
+    qs, qd, xd, J = pj.motion_kinematics(q, pj.ShoulderElbowArm(), fs=fs, samples=None)
     np.testing.assert_allclose(qs, q, atol=1e-12)
     np.testing.assert_allclose(qd, qd_true, atol=1e-10)
     np.testing.assert_allclose(J[::10], [arm4_jac(a) for a in q[::10]], atol=1e-12)
@@ -379,12 +379,12 @@ def test_motion_kinematics_closed_forms_and_savgol_filter():
                    for s in t[::10]])
     np.testing.assert_allclose(xd[::10], fd, atol=1e-8)
     # time normalisation: resampled to 25 points of the same motion, velocities in real time
-    qs25, qd25, _, _ = pj.motion_kinematics(q, pj.Arm4(), fs=fs, samples=25)
+    qs25, qd25, _, _ = pj.motion_kinematics(q, pj.ShoulderElbowArm(), fs=fs, samples=25)
     t25 = np.linspace(0, t[-1], 25)
     np.testing.assert_allclose(qd25, _cubic(t25, c)[1], atol=2e-3)  # linear interpolation of q̇
     np.testing.assert_allclose(qs25[[0, -1]], q[[0, -1]], atol=1e-12)
     noisy = q + 0.01 * rng.standard_normal(q.shape)
-    qs, qd, _, _ = pj.motion_kinematics(noisy, pj.Arm4(), fs=fs, window=0.21, samples=None)
+    qs, qd, _, _ = pj.motion_kinematics(noisy, pj.ShoulderElbowArm(), fs=fs, window=0.21, samples=None)
     np.testing.assert_allclose(qs, savgol_filter(noisy, 21, 3, axis=0), rtol=0, atol=1e-13)
     np.testing.assert_allclose(qd, savgol_filter(noisy, 21, 3, deriv=1, delta=1 / fs, axis=0), rtol=0, atol=1e-10)
 
@@ -398,7 +398,7 @@ def test_hugmp_arrays_against_per_motion_savgol():
         q = np.cumsum(0.01 * rng.standard_normal((N, 4)), axis=0) + np.array([-0.5, -0.6, -0.2, 0.8])
         motions[t].append((r, i, q))
     sub = pj.HugmpSubject(subject="S99", motions=motions, skipped=[], notes=[])
-    out = pj.hugmp_arrays(sub, pj.Arm4(), samples=30)
+    out = pj.hugmp_arrays(sub, pj.ShoulderElbowArm(), samples=30)
     assert out["qdot"].shape == (6, 2, 3, 30, 4) and out["J"].shape == (6, 2, 3, 30, 3, 4)
     assert out["mask"].sum() == 5 * 30
     for t, items in motions.items():
@@ -418,7 +418,7 @@ def test_hugmp_arrays_against_per_motion_savgol():
 @pytest.mark.bad_input("pj.motion_kinematics", "pj.hugmp_arrays")
 def test_kinematics_bad_input():
     q = np.zeros((40, 4))
-    arm = pj.Arm4()
+    arm = pj.ShoulderElbowArm()
     mk = pj.motion_kinematics
     with pytest.raises(ValueError, match="`q`"):
         mk(np.zeros(40), arm)

@@ -432,8 +432,8 @@ def test_beta_of_estimated_weights_matches_the_paper():
     K = 300
     qs = rng.uniform([-1.0, -1.2, -0.6, 0.4], [-0.2, -0.2, 0.3, 1.8], (K, 4))
     J = np.stack([arm4_jac(q) for q in qs])
-    assert np.allclose(J, pj.Arm4().jacobian(qs), atol=1e-12)  # the README chain is pj.Arm4
-    np.testing.assert_allclose(arm4_fk(qs[0]), pj.Arm4().fk(qs[0]), atol=1e-15)
+    assert np.allclose(J, pj.ShoulderElbowArm().jacobian(qs), atol=1e-12)  # the README chain is pj.ShoulderElbowArm
+    np.testing.assert_allclose(arm4_fk(qs[0]), pj.ShoulderElbowArm().fk(qs[0]), atol=1e-15)
     xd = 0.3 * rng.standard_normal((K, 3))
     v = 0.003 * rng.standard_normal((K, 4))
     qd, xds = [], []
@@ -454,7 +454,7 @@ def test_beta_of_estimated_weights_matches_the_paper():
 
 
 def test_overspecified_joint_of_the_4dof_arm(rng):
-    arm = pj.Arm4()
+    arm = pj.ShoulderElbowArm()
     q = rng.uniform([-1.2, -1.2, -0.8, 0.3], [-0.1, 0.0, 0.4, 2.0], (50, 4))
     assert list(fitting.overspecified_joints(arm.jacobian(q))) == [False, False, False, True]
     planar = pj.PlanarArm([0.3, 0.3, 0.2])
@@ -598,7 +598,7 @@ def test_lambda0_pmp_movements_give_back_W():
 
 
 def test_arm4_jacobian_against_autodiff_and_differences(rng):
-    arm = pj.Arm4(L1=0.31, L2=0.35)
+    arm = pj.ShoulderElbowArm(L1=0.31, L2=0.35)
     q = rng.uniform(-1.0, 1.0, (6, 4))
     J = np.asarray(arm.jacobian(q))
     assert np.allclose(J, jax.jit(jax.vmap(jax.jacfwd(arm.fk)))(jnp.asarray(q)), atol=1e-13)
@@ -608,8 +608,9 @@ def test_arm4_jacobian_against_autodiff_and_differences(rng):
     # README: q2 = −90° puts the straight arm forward (+x) at L1 + L2
     assert np.allclose(arm.fk(jnp.array([0.0, -np.pi / 2, 0.0, 0.0])), [0.66, 0.0, 0.0], atol=1e-12)
     # lengths are differentiable leaves
-    gL = jax.grad(lambda L: pj.Arm4(L1=L, L2=0.35).fk(jnp.asarray(q[0]))[2])(0.31)
-    fdL = (pj.Arm4(L1=0.31 + h, L2=0.35).fk(q[0])[2] - pj.Arm4(L1=0.31 - h, L2=0.35).fk(q[0])[2]) / (2 * h)
+    gL = jax.grad(lambda L: pj.ShoulderElbowArm(L1=L, L2=0.35).fk(jnp.asarray(q[0]))[2])(0.31)
+    z = lambda L: pj.ShoulderElbowArm(L1=L, L2=0.35).fk(q[0])[2]  # noqa: E731
+    fdL = (z(0.31 + h) - z(0.31 - h)) / (2 * h)
     assert np.isclose(gL, fdL, atol=1e-8)
 
 

@@ -648,3 +648,26 @@ def test_figures_without_a_model_and_bad_arguments(handmade):
         fitting.plot_pointing_joints(an, labels=("out-X",))
     plt.close("all")
 
+
+
+def test_a_trial_that_starts_on_a_peripheral_target_keeps_its_first_movement(experiment, analysis):
+    # Drop the leading centre epoch of every trial: the first target is then already on screen when
+    # the recording starts, with the hand resting at the centre. The first movement must still be
+    # analysed (its start inferred from the resting hand) and give the same curvature as before.
+    _, rec = experiment
+    keep = np.ones(len(rec.time), bool)
+    firsts = {}
+    for s in rec.subjects:
+        for trial in rec.trials(s):
+            rows = rec.rows(s, trial)
+            lead = np.argmax(rec.target[rows] != "C")
+            keep[rows[:lead]] = False
+            firsts[(s, trial)] = f"out-{rec.target[rows[lead]]}"
+    cut = pj.PointingRecording(rec.subject[keep], rec.trial[keep], rec.time[keep], rec.quat[keep], rec.target[keep],
+                               d=rec.d, radius=rec.radius)
+    an = fitting.analyze_pointing(cut)
+    for (s, trial), label in firsts.items():
+        i, j, k = an.subjects.index(s), an.labels.index(label), list(an.trials[an.subjects.index(s)]).index(trial)
+        assert np.isfinite(an.a_net[i, j, k]), [r for r in an.excluded if r[1] == trial]
+        assert an.a_net[i, j, k] == pytest.approx(analysis.a_net[i, j, k], abs=0.02)
+    assert not any("never shown" in r[3] for r in an.excluded)

@@ -135,7 +135,6 @@ def test_arm_matches_the_readme_formula(rng):
         fd = np.stack([(arm_fk_batch(q + h * e, L1, L2) - arm_fk_batch(q - h * e, L1, L2)) / (2 * h)
                        for e in np.eye(4)], -1)
         assert np.allclose(J, fd, atol=1e-7)
-    assert pj.Arm4 is pj.ShoulderElbowArm and type(pj.Arm4()).__name__ == "ShoulderElbowArm"
 
 
 def test_elbow_rest_angle_is_invisible_to_the_lambda0_pmp(rng):
@@ -374,7 +373,7 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     assert np.all(pr.status == 0) and np.all(pr.q_pred[:, 0] == pr.q_obs[:, 0])
     # the λ0-PMP pulls the hand to the recorded final hand position (its Eq 10 dynamics need not
     # have finished by the end of the recording); the straight-line baseline gets there exactly
-    target = np.asarray(pj.Arm4().fk(pr.q_obs[:, -1]))
+    target = np.asarray(pj.ShoulderElbowArm().fk(pr.q_obs[:, -1]))
     dist = np.linalg.norm(target - pr.x_obs[:, 0], axis=-1)
     miss = np.linalg.norm(pr.x_pred[:, -1] - target, axis=-1)
     assert np.all(miss < 0.25 * dist) and np.median(miss / dist) < 0.05
@@ -410,7 +409,7 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 1 + 5 * N
 
 
-@pytest.mark.bad_input("fitting.fit_reaching", "fitting.predict_reaching", "pj.Arm4", "pj.ShoulderElbowArm")
+@pytest.mark.bad_input("fitting.fit_reaching", "fitting.predict_reaching", "pj.ShoulderElbowArm")
 def test_bad_input(folders, clean_fit):
     bad = folders["bad"]
     cases = [
@@ -450,7 +449,7 @@ def test_bad_input(folders, clean_fit):
         fitting.predict_reaching(clean_fit, reps=(2, 8))
     with pytest.raises(TypeError, match="`fit`"):
         fitting.predict_reaching({"KJ": 1})
-    for make, match in ((lambda: pj.Arm4(L1=-0.3), "L1"), (lambda: pj.ShoulderElbowArm(L2=np.nan), "L2"),
+    for make, match in ((lambda: pj.ShoulderElbowArm(L1=-0.3), "L1"), (lambda: pj.ShoulderElbowArm(L2=np.nan), "L2"),
                         (lambda: pj.ShoulderElbowArm().fk(np.zeros(3)), "`q`")):
         with pytest.raises(ValueError, match=match):
             make()

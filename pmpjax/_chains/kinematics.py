@@ -44,7 +44,7 @@ class Chain:
     **Optional fast path.** Instead of ``fk``, a chain may implement the component-leading kernel
     ``fk_jac_soa(qc)``: ``qc`` (n, ...) -> ``(x (m, ...), J (m, n, ...))`` with the small axes
     leading and the batch trailing (see ``pmpjax._base.linalg``), which XLA fuses into the RK4
-    loop; ``Wrist``, ``PlanarArm`` and ``Arm4`` do. Without it the base class builds that kernel
+    loop; ``Wrist``, ``PlanarArm`` and ``ShoulderElbowArm`` do. Without it the base class builds that kernel
     from ``fk`` (and ``jacobian``) by ``jax.vmap``, as :class:`FunctionChain` does for a plain
     function.
     """

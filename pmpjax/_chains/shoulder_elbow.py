@@ -1,4 +1,4 @@
-"""``ShoulderElbowArm`` (alias ``Arm4``): the 4-DoF shoulder–elbow arm of the HuG-MP recordings
+"""``ShoulderElbowArm``: the 4-DoF shoulder–elbow arm of the HuG-MP recordings
 (also the 4-DoF chain of the IK paper's Experiment 1).
 
 Shoulder-centred frame: x forward, y to the subject's left, z up; zero pose = arm hanging down,
@@ -34,7 +34,7 @@ def _cross(a, b):
 class ShoulderElbowArm(Chain):
     """Shoulder (3 rotations) + elbow chain, hand position ``x`` (3,) [m] relative to the shoulder.
 
-    The 4-DoF arm of the HuG-MP recordings (``pj.Arm4`` is the same class under its old name).
+    The 4-DoF arm of the HuG-MP recordings.
 
     ``L1`` upper-arm and ``L2`` forearm-to-hand lengths [m] are array leaves (differentiable,
     vmappable). Analytic Jacobian: column i is ``a_i × (p − o_i)`` with the joint axes
@@ -81,5 +81,3 @@ class ShoulderElbowArm(Chain):
         L1, L2 = float(self.L1), float(self.L2)
         return f"shell {abs(L1 - L2):.3g} m < |x| < {L1 + L2:.3g} m"
 
-
-Arm4 = ShoulderElbowArm  # the earlier name (HuG-MP's 4 joints); kept so existing code runs

@@ -2,7 +2,7 @@
 
 **HuG-MP** (F. Bianchin et al., TUM-ITR/HuG-MP, MIT licence; bundled in ``pmpjax/data/hugmp``,
 see its README): ``S0i_trajs.mat`` (MATLAB v5) holds ``tasks``, a repetitions × 6 cell of (M, 1)
-cells of 4 × N joint-angle arrays [deg] at 100 Hz, on the 4-DoF shoulder–elbow arm ``pj.Arm4``.
+cells of 4 × N joint-angle arrays [deg] at 100 Hz, on the 4-DoF shoulder–elbow arm ``pj.ShoulderElbowArm``.
 
 **Smoothing** is ``scipy.signal.savgol_filter`` (cubic, ``mode='interp'``: polynomial fits at the
 ends). Called once per motion it costs ≈ 4 ms (the end fits are two least-squares solves per call),
@@ -169,7 +169,7 @@ def _smooth_all(qs, fs, win, samples):
 
 def _check_chain(chain, n=None):
     if not (hasattr(chain, "fk_jac_soa") and hasattr(chain, "n")):
-        raise TypeError(f"`chain` must be a pmpjax chain (e.g. pj.Arm4()), got {type(chain).__name__}")
+        raise TypeError(f"`chain` must be a pmpjax chain (e.g. pj.ShoulderElbowArm()), got {type(chain).__name__}")
     if n is not None and int(chain.n) != n:
         raise ValueError(f"`chain` has {chain.n} joints, the data {n}")
 

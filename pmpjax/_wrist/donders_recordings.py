@@ -319,6 +319,10 @@ def _read_csv(path):
                              f"got {row[col['sample']]!r}") from e
         vals = csv_floats(path, ln, row, col, (*ori_cols, "x1", "x2"))
         ori, x = vals[: len(ori_cols)], vals[len(ori_cols):]
+        if not has_q and np.any(np.abs(ori) > 2 * np.pi):
+            c = ori_cols[int(np.argmax(np.abs(ori) > 2 * np.pi))]
+            raise ValueError(f"{path}: line {ln}, column {col[c] + 1} ({c}): {ori[ori_cols.index(c)]:g} is above 2π: "
+                             "joint angles are in radians (degrees?)")
         if sample in data.setdefault(name, {}):
             raise ValueError(f"{path}: line {ln}: duplicate sample {sample} for subject {name!r}")
         data[name][sample] = (ori, x)

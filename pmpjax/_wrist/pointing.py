@@ -188,6 +188,9 @@ def _one_trial_problem(rec, rows):
     if np.any(step <= 0):
         i = int(np.argmax(step <= 0)) + 1
         return int(rows[i]), "time", f"time not strictly increasing ({float(time[i - 1])!r} then {float(time[i])!r})"
+    if np.median(step) > 0.5:  # an IMU samples at tens of Hz or faster
+        return int(rows[1]), "time", (f"median sample interval {float(np.median(step)):.4g} s: time must be in "
+                                      "seconds (milliseconds?)")
     norm = np.linalg.norm(quat, axis=-1)
     off = np.abs(norm - 1.0) > _UNIT_TOL
     if off.any():
