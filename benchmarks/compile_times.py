@@ -37,7 +37,7 @@ the main job compiles nothing), and keeping shapes fixed (batch sizes are bucket
 two, so similar sizes share a compile). Measured and rejected: a 4-stage-loop RK4 (compile 8.4 →
 4.7 s but 3.4× slower batched runs) and ``--xla_backend_optimization_level=0`` (no gain).
 
-Session 6 (2026-12-02 03:40–03:51 UTC, idle, load 1.4–1.7; A/B against the previous commit in
+Run of 2026-12-02 (03:40–03:51 UTC, idle, load 1.4–1.7; A/B against the previous commit in
 alternating fresh processes): derivatives through ``simulate`` now take the JVP of a variant that
 loops over the four RK4 stages (the field appears once per step, not four times) and ``sincos``
 has a tangent rule instead of differentiating its polynomials. The ``fit_time_constants`` graph
@@ -48,7 +48,7 @@ end-to-end compile column does not resolve it: before 22.6, 22.8, 18.1 s, after 
 run times and B = 10 000 final-only ``simulate`` (1.0 s) unchanged within noise. The LM loop
 already traces the residual and its Jacobian once (``fitting._optimise``).
 
-Session 7 (2026-12-02 05:45–06:30 UTC, machine shared, load 5–7: CPU seconds of this process,
+Run of 2026-12-02 (05:45–06:30 UTC, machine shared, load 5–7: CPU seconds of this process,
 ``time.process_time``, of ``_fit_items.trace/lower/compile`` at the ``--quick`` pointing size,
 A/B in alternating fresh processes). ``least_squares`` now takes its Jacobians inside
 ``pmpjax.internal.forward_jacobians``: ``simulate``'s JVP is a ``custom_vmap`` whose batching rule
@@ -67,7 +67,7 @@ with a fresh cache, wall 225.5 → 186.4 s (pointing 207 → 171 s; load 5–6);
 (``--only pointing``, jobs 1, no cache) 112 → 116 s at load 4–5 (it then compiles the larger
 fit and a 1024-row equilibrium batch itself).
 
-Session 9 (2026-12-02 11:55–13:25 UTC, idle, the machine ≈ 25 % slower after 12:15 than before,
+Run of 2026-12-02 (11:55–13:25 UTC, idle, the machine ≈ 25 % slower after 12:15 than before,
 so compare within a pair only). XLA:CPU's MLIR fusion emitters (its default) against its legacy
 loop emitters (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=false``), whole table run back to back,
 compile / run [s]: equilibrium_posture 3.14 / 0.004 → 2.42 / 0.002, figure3_data 6.34 / 0.027 →
@@ -88,7 +88,7 @@ and 181 → 163 s wall (339 → 267 and 337 → 301 s CPU). Also tried (NIO fit,
 ``--xla_cpu_use_thunk_runtime=false`` 10.0 / 0.70, ``--xla_cpu_parallel_codegen_split_count=1``
 (simulate) no gain.
 
-Session 10 (2026-12-02 15:55–16:00 UTC, idle; A/B against 6600550 in alternating fresh processes,
+Run of 2026-12-02 (15:55–16:00 UTC, idle; A/B against 6600550 in alternating fresh processes,
 two rounds, compile / run [s]): ``simulate`` below 1 025 movements now runs its RK4 stages in a
 loop and compiles top-level calls with the legacy emitters (eager calls skip its
 ``custom_jvp``/``custom_vmap`` wrappers, under which JAX dropped the options): simulate 4.54, 3.42

@@ -1,6 +1,6 @@
 """Benchmark: IK-weight identification (Algorithm 1) for many subjects in one call.
 
-Workload (issue 4): 1 000 synthetic subjects × 500 samples, n = 5, m = 3 (the Fig 1 data),
+Workload: 1 000 synthetic subjects × 500 samples, n = 5, m = 3 (the Fig 1 data),
 a fixed number of iterations (``tol = step_tol = 0``). Baseline, run in the same process: a
 faithful per-subject NumPy/SciPy implementation of Algorithm 1 as the paper's MATLAB does it —
 a Python loop over samples (weighted pseudo-inverse with ``np.linalg.inv``, error, ``ū``, ``v̄``)
@@ -23,7 +23,7 @@ machine was shared with six other sessions' test suites, load average 16.8 at st
 end on 2 cores, so every rate is 10–40× below its idle value and the ratios measure contention,
 not the code: baseline 0.140 subjects/s, 1 core 128.9, 1 device 75.8, 2 devices 59.0 (542x; 1 core
 922x); compile + first run 80–86 s; real data 123 s / 167 s. Rerun on an idle machine to refresh
-the table below (the ≥ 1 600x of issue 13 is the idle figure; the code path it times is unchanged).
+the table below (the ≥ 1 600x target is the idle figure; the code path it times is unchanged).
 
 Idle re-run 2026-12-02 01:23 UTC (after the layout changes: IK weights flatten their batch with the
 shared ``flatten_batch``; load 1.2 → 1.4): baseline 0.697 subjects/s (this run's SciPy loop was

@@ -16,7 +16,7 @@ Compared in the same run (see ``_baselines.py``, which re-implements the field f
 JAX rows: ``compile`` = ``_run.lower(...).compile()`` of the jitted function behind ``simulate``
 (trace+lower reported separately); ``kernel`` = the compiled executable alone; ``call`` = the public
 ``pmpjax.simulate`` (input checks, RK4 stability check, ``block_until_ready``). The kernel is the
-one ``simulate`` runs at that batch size: since 2026-12-02 (session 10) up to 1 024 movements a
+one ``simulate`` runs at that batch size: since 2026-12-02 up to 1 024 movements a
 compile-light variant (RK4 stages in a loop, XLA's legacy emitters; ``_simulate._primal_run``), so
 the B = 1/100/1 000 rows below, measured before, show the unrolled kernel. Times are the
 minimum of several repeats (other engineers share the machine). Rates use the ``call`` time.
@@ -32,7 +32,7 @@ with ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` and splits the batch
 devices, either by passing ``NamedSharding``-ed ``q0``/``target`` to ``simulate`` (GSPMD) or by
 ``jax.shard_map`` around ``simulate``; the faster is reported, both are in the JSON.
 
-Save modes (``--saves``, issue 13): the public ``simulate`` at B = 10 000 saving only the final
+Save modes (``--saves``): the public ``simulate`` at B = 10 000 saving only the final
 state (the baseline of the ratios), every step (401 samples, 353 MB of output), every 10th step,
 at 40 given times, and a user's loss ∫|ẋ|² dt on the every-step trajectory, once as a jitted
 batched call and once as a jitted ``jax.vmap`` of single-movement calls. ``compile`` = first call
@@ -583,7 +583,7 @@ def render(res, big):
 
 
 # ----------------------------------------------------------------------------------------------
-# --saves: what saving costs (issue 13)
+# --saves: what saving costs
 
 SAVE_MODES = {"final": pj.SaveAt(final=True), "every step": pj.SaveAt(), "every 10": pj.SaveAt(every=10),
               "ts (40)": pj.SaveAt(ts=tuple(float(v) for v in np.arange(1, 41) * 0.01))}

@@ -5,18 +5,12 @@ own damping, step count and convergence flag; finished items are frozen while ot
 Every fit in ``fitting`` (Donders/NIO, time constants, IK-weight gradient variant, primitives)
 goes through it. Jacobians of the residual by forward-mode autodiff (parameters are few).
 
-**Why not optimistix** (design card allows it; measured with ``benchmarks/least_squares_optimistix.py``
-on the Donders NIO fit: 16 subjects × 2 starts × 500 postures, the same residual, starts and
-100-step limit, 2026-12-01 on the shared 2-core machine at load 12–13, so absolute times are
-inflated; ratios are what count). ``optimistix.least_squares(LevenbergMarquardt(rtol=atol=1e-12))``
-(0.1.0) reaches the same optima (best-start costs equal to 1.9e-15 relative) but compiles in
-324 s vs 179 s here (1.8×) and runs in 82.5 s vs 40.1 s (2.1×): it takes a median 44.5 LM steps
-against 18.5 (its trust-region LM accepts shorter steps than Nielsen's damping update here), and
-under ``vmap`` every lane waits for the slowest. Its one advantage, implicit gradients of fitted
-optima (``ImplicitAdjoint``; the loop below has no reverse mode), is not needed by any fit here
-(fits report optima and standard errors, not derivatives of optima); should it be, the implicit
-function theorem on ``Jᵀr = 0`` is a few lines on top of this loop, as ``pmpjax._base.newton`` does
-for equilibria. Decision: keep this loop; no optimistix (nor optax) dependency.
+**Why not optimistix**: on the Donders NIO fit (``benchmarks/least_squares_optimistix.py``: the
+same residual, starts and step limit) ``optimistix.least_squares(LevenbergMarquardt)`` reaches the
+same optima but compiles 1.8× and runs 2.1× slower (its trust-region steps are shorter than
+Nielsen's damping update here, and under ``vmap`` every lane waits for the slowest); its one
+advantage, implicit gradients of fitted optima, no fit here needs. No optimistix (nor optax)
+dependency.
 """
 
 from __future__ import annotations

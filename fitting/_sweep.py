@@ -24,28 +24,11 @@ absent or whole and self-verifying: on restart every shard is re-hashed and its 
 against the manifest (leaf count, dtypes, shapes, rows); a truncated, corrupted or misnamed
 shard is deleted and its chunk recomputed, and verified chunks are read, never rewritten.
 
-**Why NPZ shards** (measured on this 2-core machine, 2026-12-01, shared with other jobs: outputs
-``A_net, A_sum`` (8,) float64 and ``status`` (8,) int32 per row, 10 000-row chunks; write = every
-chunk written atomically with fsync (Zarr: written in place, its own way, no fsync); read = read
-and verify every chunk; resume-verify = re-hash every shard; ``python benchmarks/sweep.py --stores``
-with pyarrow and zarr importable)::
-
-    rows   format    write [s]        read+verify [s]   resume-verify [s]   extra dependency
-                     load 10 / 15-20  load 10 / 15-20   load 10 / 15-20
-    10^5   NPZ        0.40 /  1.09     0.33 /  1.02      0.15 / 0.58        none (NumPy)
-    10^5   Parquet    2.62 / 16.23     1.29 /  1.89      0.13 / 0.47        pyarrow (~40 MB wheel)
-    10^5   Zarr v3    3.08 /  0.77     0.55 /  0.96      0.39 / 0.81        zarr, numcodecs, donfig, crc32c
-    10^6   NPZ        4.35 / 11.65     4.15 / 11.41      1.05 / 7.07
-    10^6   Parquet   15.46 / 77.36     5.98 / 13.10      1.31 / 4.17
-    10^6   Zarr v3    3.75 / 13.32     3.13 /  8.35      3.58 / 4.22
-
-NPZ and Zarr cost about the same (each wins some cells; the load moved by 2x between the runs)
-and Parquet is 3-7x slower to write; every format reads 10⁶ rows in seconds, against minutes of
-compute for the chunks they hold (10⁶ movements of the curvature kernel: ~6 min under that load).
-NPZ wins on what is left: no dependency, and a chunk is one file, so one atomic rename makes it
-durable and its checksummed name makes it self-verifying. Zarr writes each array's chunk in place
-(a kill can leave one array's chunk new and another's old, so it needs checksum records of its
-own) and skips all-zero chunks; Parquet needs list columns for the (8,)-shaped leaves.
+**Why NPZ shards** (``python benchmarks/sweep.py --stores``): NPZ and Zarr write and read 10⁶
+rows in seconds, Parquet 3–7× slower to write, all far below the minutes of compute the chunks
+hold; NPZ wins on what is left: no dependency, and a chunk is one file, so one atomic rename makes
+it durable and its checksummed name makes it self-verifying (Zarr writes each array's chunk in
+place and would need checksum records of its own; Parquet needs list columns for shaped leaves).
 
 **Failures**: a row whose outputs hold NaN/inf, or whose ``status`` leaf (an integer leaf named
 ``status``, codes of :class:`pmpjax.Status`) is non-zero, is marked ``failed`` with the reason;

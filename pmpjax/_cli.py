@@ -15,10 +15,12 @@ not empty; their log lines and progress bars appear in this process's display.
 Parts are built in (Figure 3, Figure 4, the postural primitives) or registered by installed packages under the
 ``pmpjax.jobs`` entry-point group (``fitting`` registers its fits there, so ``pmpjax`` never
 imports ``fitting``). A part is ``part(ctx: PartContext) -> dict`` (JSON-able results); it
-records its figures and tables with ``ctx.figure`` and ``ctx.table``. Subcommands for users'
-files (``fit-donders``, ``analyze-pointing``, ...) are registered the same way under
-``pmpjax.commands``: ``command(subparsers) -> None`` adds a parser whose ``func(args) -> int``
-runs it. Bad input ends with a one-line message and exit status 2, never a traceback.
+records its figures and tables with ``ctx.figure`` and ``ctx.table``; a ``converged`` entry
+``[n_converged, n_total]`` in its results shows it as e.g. "ok, 0/12 converged" when not every
+fit converged. Subcommands for users' files (``fit-donders``, ``analyze-pointing``, ...) are
+registered the same way under ``pmpjax.commands``: ``command(subparsers) -> None`` adds a parser
+whose ``func(args) -> int`` runs it. Bad input ends with a one-line message and exit status 2,
+never a traceback.
 
 JAX's persistent compilation cache is on for the command line (``$PMPJAX_CACHE_DIR``, default
 ``~/.cache/pmpjax/jax``; ``--no-cache`` turns it off), so a second run does not recompile.
@@ -310,6 +312,7 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     def record(name: str | None, entry: dict | None = None) -> None:
         if name is not None:
             results[name] = entry
+            ui.part_done(name, entry)
         rank = {n: i for i, n in enumerate(parts)}
         ordered = {"_meta": meta, **dict(sorted(((k, v) for k, v in results.items() if k != "_meta"),
                                                 key=lambda kv: (rank.get(kv[0], len(rank)), kv[0])))}
@@ -321,6 +324,7 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
 
     n_workers = min(jobs, len(todo))
     meta["jobs"] = max(n_workers, 1)
+    ui.begin(len(todo))
     from ._report import write_report
 
     try:
@@ -349,14 +353,21 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
 
 
 def _run_part(name: str, part, ctx: PartContext) -> dict:
-    """Run one part; its results.json entry (``status`` "ok" or "failed", ``seconds``, artefacts)."""
+    """Run one part; its results.json entry (``status`` "ok" or "failed", ``seconds``, artefacts;
+    ``converged`` [n, total] and ``all_converged`` when its results report the fits' convergence)."""
+    from ._report import convergence
+
     t0 = time.perf_counter()
     entry: dict = {"quick": ctx.quick}
     doc = ""
     try:
         fn = _load(part)
         doc = (inspect.getdoc(fn) or "").split("\n\n")[0]
-        entry.update(status="ok", results=_call_part(fn, ctx))
+        res = _call_part(fn, ctx)
+        entry["status"] = "ok"
+        if (c := convergence(res)) is not None:
+            entry.update(converged=list(c), all_converged=c[0] == c[1])
+        entry["results"] = res
     except Exception as e:  # a failing part is reported; the others still run
         (ctx.out / f"{name}.error.txt").write_text(traceback.format_exc())
         entry.update(status="failed", error=f"{type(e).__name__}: {e}")
@@ -624,8 +635,9 @@ def _json_default(o):
 
 
 class _UI:
-    """The parent's display: a rich console, one line per running part with its elapsed time, and
-    the progress bars of loops inside parts (``ctx.progress``; from workers over a queue)."""
+    """The parent's display: a rich console, one line per running part with its elapsed time, the
+    parts done out of those to run, a line per finished part with its status, and the progress
+    bars of loops inside parts (``ctx.progress``; from workers over a queue)."""
 
     def __init__(self, enabled: bool):
         import threading
@@ -639,10 +651,33 @@ class _UI:
         self._tasks: dict[str, object] = {}
         self._done: set[str] = set()  # (a late "start" from the queue must not bring back a finished part)
         self._inner: dict[str, tuple[str, object]] = {}
+        self._n_parts, self._n_done, self._overall = 0, 0, None
         if enabled:
             self._prog = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
                                   MofNCompleteColumn(), TimeElapsedColumn(), console=self.console, transient=True)
             self._prog.start()
+
+    def begin(self, n_parts: int) -> None:
+        """Count the parts to run."""
+        with self._lock:
+            self._n_parts, self._n_done = n_parts, 0
+            if self.enabled and n_parts:
+                self._overall = self._prog.add_task("[bold]parts done[/]", total=n_parts)
+
+    def part_done(self, name: str, entry: dict) -> None:
+        """A part has finished: its status (amber when not every fit converged) and the count."""
+        from rich.markup import escape
+
+        from ._report import part_status
+
+        label, cls = part_status(entry)
+        colour = {"ok": "green", "partial": "dark_orange"}.get(cls, "red")
+        with self._lock:
+            self._n_done += 1
+            self.console.print(f"[bold cyan]{name}[/]: [{colour}]{escape(label)}[/] in {entry.get('seconds', '?')} s "
+                               f"({self._n_done}/{self._n_parts} parts)", highlight=False)
+            if self._overall is not None:
+                self._prog.update(self._overall, completed=self._n_done)
 
     def factory(self, iterable, total=None, description=""):
         if not self.enabled:

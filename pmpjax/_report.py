@@ -1,13 +1,16 @@
 """The main job's report: ``report.md`` and a self-contained ``report.html`` (figures embedded
 as base64 PNG, tables inline) showing every figure and table a part recorded, each with what it
-shows and the paper's corresponding figure or number, plus versions, seed and wall times."""
+shows and the paper's corresponding figure or number, links to every other file in the output
+folder, plus versions, seed and wall times."""
 
 from __future__ import annotations
 
 import base64
 import csv
 import html
+import re
 from pathlib import Path
+from urllib.parse import quote
 
 TITLE = "pmpjax — reproduced results"
 INTRO = (
@@ -16,6 +19,78 @@ INTRO = (
     "primitives (Williamson 1996). Each figure and table says what it shows and, in italics, "
     "what the paper reports for comparison."
 )
+#: Files listed under "Other files" at most (an output folder may hold much else).
+MAX_OTHER_FILES = 300
+
+_CODE = re.compile(r"``(.+?)``|`([^`\n]+)`")
+_INT = re.compile(r"[+-]?\d+")
+_FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+def convergence(results) -> tuple[int, int] | None:
+    """``(n_converged, n_total)`` of a part's results: their ``converged`` as ``[n, total]`` (two
+    integers) or as one boolean per fit (nested lists); None without such an entry."""
+    c = results.get("converged") if isinstance(results, dict) else None
+    if not isinstance(c, list | tuple):
+        return None
+    if len(c) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in c):
+        return int(c[0]), int(c[1])
+    flat, stack = [], [c]
+    while stack:
+        for v in stack.pop():
+            (stack.append if isinstance(v, list | tuple) else flat.append)(v)
+    if flat and all(isinstance(v, bool) for v in flat):
+        return sum(flat), len(flat)
+    return None
+
+
+def part_status(entry: dict) -> tuple[str, str]:
+    """The status of a part's ``results.json`` entry as shown, e.g. ``ok, 0/12 converged``, and
+    its class: "ok", "partial" (not every fit converged) or "failed"."""
+    status = entry.get("status", "?")
+    if status != "ok":
+        return status, "failed"
+    c = entry.get("converged") or convergence(entry.get("results"))
+    if c and c[0] < c[1]:
+        return f"ok, {c[0]}/{c[1]} converged", "partial"
+    return "ok", "ok"
+
+
+def _inline(text: str) -> str:
+    """``text`` as HTML, its RST or Markdown inline code (double or single backticks) as ``<code>``."""
+    out, pos = [], 0
+    for m in _CODE.finditer(text):
+        out += [html.escape(text[pos:m.start()]), f"<code>{html.escape(m[1] or m[2])}</code>"]
+        pos = m.end()
+    return "".join(out) + html.escape(text[pos:])
+
+
+def _paper(text: str) -> str:
+    """The paper reference, labelled "Paper:" unless it names the paper itself."""
+    return text if re.search(r"\bpapers?\b", text, re.IGNORECASE) else f"Paper: {text}"
+
+
+def _cell(value: str, column: str) -> str:
+    """A CSV cell as shown: status codes by name, numbers to about four significant digits."""
+    if column.strip().lower() == "status" and _INT.fullmatch(value):
+        from ._base.status import Status
+
+        try:
+            return Status(int(value)).name
+        except ValueError:
+            return value
+    if _INT.fullmatch(value) or not _FLOAT.fullmatch(value):
+        return value
+    x = float(value)
+    return f"{x:.0f}" if 1e4 <= abs(x) < 1e15 else f"{x:.4g}"
+
+
+def _href(path: str) -> str:
+    return html.escape(quote(path), quote=True)
+
+
+def _link(path: str) -> str:
+    return f"<a href='{_href(path)}'>{html.escape(path)}</a>"
 
 
 def _parts(results: dict):
@@ -25,62 +100,92 @@ def _parts(results: dict):
 def _read_csv(path: Path, max_rows: int = 60):
     with path.open() as f:
         rows = list(csv.reader(f))
-    return rows[0], rows[1 : max_rows + 1], max(len(rows) - 1 - max_rows, 0)
+    head = rows[0] if rows else []
+    body = [[_cell(c, head[i] if i < len(head) else "") for i, c in enumerate(r)] for r in rows[1 : max_rows + 1]]
+    return head, body, max(len(rows) - 1 - max_rows, 0)
+
+
+def _other_files(out: Path, linked: set[str]) -> list[str]:
+    """Files under ``out`` (relative POSIX paths) that the report does not link otherwise."""
+    found = []
+    for p in sorted(out.rglob("*")):
+        rel = p.relative_to(out).as_posix()
+        if p.is_file() and rel not in linked and not rel.endswith(".tmp"):
+            found.append(rel)
+    return found
 
 
 def write_report(out: Path, results: dict) -> tuple[Path, Path]:
     """Write ``report.md`` and ``report.html`` into ``out`` from ``results`` (results.json)."""
     out = Path(out)
     meta = results.get("_meta", {})
-    md = [f"# {TITLE}", "", INTRO, ""]
-    body = [f"<h1>{html.escape(TITLE)}</h1>", f"<p>{html.escape(INTRO)}</p>"]
-    # Summary table of parts.
+    linked = {"report.html", "report.md", "results.json"}
+    everything = "Every number of the run: [results.json](results.json); this report also as [report.md](report.md)."
+    md = [f"# {TITLE}", "", INTRO, "", everything, ""]
+    body = [f"<h1>{html.escape(TITLE)}</h1>", f"<p>{html.escape(INTRO)}</p>",
+            f"<p>Every number of the run: {_link('results.json')}; this report also as {_link('report.md')}.</p>"]
     md += ["| part | status | wall time [s] | what it is |", "|---|---|---:|---|"]
     rows_html = []
     for name, entry in _parts(results):
-        status = entry.get("status", "?")
-        summary = " ".join(entry.get("doc", "").split())  # one table row, however the docstring wraps
-        md.append(f"| [{name}](#{name}) | {status} | {entry.get('seconds', '')} | {summary} |")
-        cls = "ok" if status == "ok" else "failed"
+        label, cls = part_status(entry)
+        doc = " ".join(entry.get("doc", "").split())  # one table row, however the docstring wraps
+        md.append(f"| [{name}](#{name}) | {label} | {entry.get('seconds', '')} | {doc} |")
         rows_html.append(
-            f"<tr><td><a href='#{name}'>{name}</a></td><td class='{cls}'>{status}</td>"
-            f"<td>{entry.get('seconds', '')}</td><td>{html.escape(entry.get('doc', ''))}</td></tr>"
+            f"<tr><td><a href='#{name}'>{name}</a></td><td class='{cls}'>{html.escape(label)}</td>"
+            f"<td>{entry.get('seconds', '')}</td><td>{_inline(doc)}</td></tr>"
         )
-    body.append("<table><tr><th>part</th><th>status</th><th>wall time [s]</th><th>what it is</th></tr>"
-                + "".join(rows_html) + "</table>")
+    body.append("<div class='scroll'><table><tr><th>part</th><th>status</th><th>wall time [s]</th>"
+                "<th>what it is</th></tr>" + "".join(rows_html) + "</table></div>")
     for name, entry in _parts(results):
         md += ["", f"## {name}", "", entry.get("doc", "")]
-        body.append(f"<h2 id='{name}'>{html.escape(name)}</h2><p>{html.escape(entry.get('doc', ''))}</p>")
+        body.append(f"<h2 id='{name}'>{html.escape(name)}</h2><p>{_inline(entry.get('doc', ''))}</p>")
+        label, cls = part_status(entry)
+        if cls == "partial":
+            md += ["", f"**Status: {label}** (the fits' status in results.json)"]
+            body.append(f"<p class='partial'>Status: {html.escape(label)} (the fits' status in results.json)</p>")
         if entry.get("status") == "failed":
-            md += ["", f"**Failed:** `{entry.get('error', '')}` (traceback in `{name}.error.txt`)"]
-            body.append(f"<p class='failed'>Failed: {html.escape(entry.get('error', ''))}</p>")
+            md += ["", f"**Failed:** `{entry.get('error', '')}`"]
+            body.append(f"<p class='failed'>Failed: {html.escape(entry.get('error', ''))}")
+            if (out / f"{name}.error.txt").exists():
+                linked.add(f"{name}.error.txt")
+                md[-1] += f" (traceback in [{name}.error.txt]({quote(name)}.error.txt))"
+                body[-1] += f" (traceback in {_link(name + '.error.txt')})"
+            body[-1] += "</p>"
         for a in entry.get("artefacts", []):
             path = out / a["path"]
-            paper = f" *Paper: {a['paper']}*" if a.get("paper") else ""
-            md += ["", f"**{a['path']}** — {a['caption']}{paper}", ""]
-            paper_html = f" <em>Paper: {html.escape(a['paper'])}</em>" if a.get("paper") else ""
-            cap = f"<p><b>{html.escape(a['path'])}</b> — {html.escape(a['caption'])}{paper_html}</p>"
+            linked.add(a["path"])
+            paper = _paper(a["paper"]) if a.get("paper") else ""
+            md += ["", f"**[{a['path']}]({quote(a['path'])})** — {a['caption']}" + (f" *{paper}*" if paper else ""), ""]
+            paper_html = f" <em>{_inline(paper)}</em>" if paper else ""
+            cap = f"<p><b>{_link(a['path'])}</b> — {_inline(a['caption'])}{paper_html}</p>"
             if a["kind"] == "figure":
-                md.append(f"![{a['path']}]({a['path']})")
+                md.append(f"![{a['path']}]({quote(a['path'])})")
                 data = base64.b64encode(path.read_bytes()).decode() if path.exists() else ""
                 body.append(f"<figure>{cap}<img alt='{html.escape(a['path'])}' "
                             f"src='data:image/png;base64,{data}'></figure>")
             else:
-                md.append(f"[{a['path']}]({a['path']})")
                 table = ""
                 if path.exists():
                     head, rows, more = _read_csv(path)
-                    md += ["", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+                    md += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
                     md += ["| " + " | ".join(r) + " |" for r in rows]
                     if more:
                         md.append(f"| … {more} more rows in {a['path']} |")
-                    table = ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"
-                             + "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
-                                       for r in rows) + "</table>")
+                    table = ("<div class='scroll'><table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head)
+                             + "</tr>" + "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                                                 for r in rows) + "</table></div>")
                     if more:
-                        table += f"<p>… {more} more rows in <a href='{a['path']}'>{a['path']}</a></p>"
-                body.append(f"<div class='table'>{cap}<p><a href='{html.escape(a['path'])}'>"
-                            f"{html.escape(a['path'])}</a></p>{table}</div>")
+                        table += f"<p>… {more} more rows in {_link(a['path'])}</p>"
+                body.append(f"<div class='table'>{cap}{table}</div>")
+    others = _other_files(out, linked)
+    if others:
+        shown, more = others[:MAX_OTHER_FILES], len(others) - MAX_OTHER_FILES
+        md += ["", "## Other files in the output folder", ""] + [f"- [{f}]({quote(f)})" for f in shown]
+        body.append("<h2 id='other-files'>Other files in the output folder</h2><ul>"
+                    + "".join(f"<li>{_link(f)}</li>" for f in shown) + "</ul>")
+        if more > 0:
+            md.append(f"- … and {more} more")
+            body.append(f"<p>… and {more} more</p>")
     run = f"Seed {meta.get('seed')}, quick = {meta.get('quick')}"
     if "wall_seconds" in meta:
         run += f"; the last run took {meta['wall_seconds']} s wall time with {meta.get('jobs', 1)} worker process(es)"
@@ -97,7 +202,8 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
         "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.45}"
         "img{max-width:100%;border:1px solid #ddd}table{border-collapse:collapse;margin:.5em 0;font-size:.9em}"
         "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#f3f3f3}"
-        ".ok{color:#060}.failed{color:#b00}em{color:#555}figure{margin:1.5em 0}"
+        ".scroll{overflow-x:auto;max-width:100%}code{background:#f3f3f3;padding:0 .2em;border-radius:3px}"
+        ".ok{color:#060}.partial{color:#b36b00}.failed{color:#b00}em{color:#555}figure{margin:1.5em 0}"
         "</style></head><body>" + "\n".join(body) + "</body></html>\n"
     )
     return md_path, html_path

@@ -38,11 +38,11 @@ def test_simulate_rejects_bad_input():
 
 @pytest.mark.bad_input("pj.figure3_data", "pj.plot_figure3")
 def test_figure3_rejects_bad_input():
-    with pytest.raises((ValueError, TypeError)):
+    with pytest.raises((ValueError, TypeError), match="dt"):
         pj.figure3_data(dt=-1e-3)
-    with pytest.raises((ValueError, TypeError)):
+    with pytest.raises((ValueError, TypeError), match="no_such_parameter"):
         pj.figure3_data(no_such_parameter=1.0)
-    with pytest.raises((ValueError, TypeError, KeyError)):
+    with pytest.raises((ValueError, TypeError, KeyError), match="data"):
         pj.plot_figure3({"x": np.zeros(3)})
 
 

@@ -76,6 +76,45 @@ def test_a_failing_part_is_reported_and_the_others_run(tmp_path, monkeypatch):
     assert "Failed" in (tmp_path / "report.html").read_text()
 
 
+def _unconverged_part(ctx):
+    """Fits of which none converged."""
+    return {"converged": [0, 3]}
+
+
+def _converged_part(ctx):
+    """Fits that all converged (one flag per fit)."""
+    return {"converged": [[True], [True]]}
+
+
+def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, capsys):
+    parts = {"partial": _unconverged_part, "whole": _converged_part}
+    monkeypatch.setattr(_cli, "available_parts", lambda: parts)
+    _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["partial"]["status"] == "ok" and saved["partial"]["converged"] == [0, 3]
+    assert saved["partial"]["all_converged"] is False
+    assert saved["whole"]["converged"] == [2, 2] and saved["whole"]["all_converged"] is True
+    html = (tmp_path / "report.html").read_text()
+    assert "<td class='partial'>ok, 0/3 converged</td>" in html and "<td class='ok'>ok</td>" in html
+    assert ".partial{color:#b36b00}" in html and ".ok{color:#060}" in html  # amber, green
+    assert "| [partial](#partial) | ok, 0/3 converged |" in (tmp_path / "report.md").read_text()
+    err = capsys.readouterr().err
+    assert "partial: ok, 0/3 converged" in err and "whole: ok in" in err
+    assert "(1/2 parts)" in err and "(2/2 parts)" in err
+
+
+def test_the_progress_display_counts_the_parts_done():
+    ui = _cli._UI(True)
+    try:
+        ui.begin(3)
+        ui.part_done("a", {"status": "ok", "seconds": 1.0})
+        ui.part_done("b", {"status": "ok", "converged": [1, 2], "seconds": 1.0})
+        overall = ui._prog.tasks[0]
+        assert (overall.completed, overall.total) == (2, 3) and "parts done" in overall.description
+    finally:
+        ui.close()
+
+
 # Parts for the worker-process tests: module-level, so that spawned workers can import them.
 def _raising_part(ctx):
     """Raises."""

@@ -1,4 +1,4 @@
-"""Issue 9 item 6: public entry points work inside a caller's jit, vmap and grad (and their
+"""Public entry points work inside a caller's jit, vmap and grad (and their
 compositions) with arrays captured from outside, and give the eager call's values.
 
 Each case is ``(f, x)`` with ``f`` a function of one array built from public calls that closes

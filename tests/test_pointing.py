@@ -1,4 +1,4 @@
-"""Wrist-pointing experiments (issue 11): recording format, synthetic experiment, analysis,
+"""Wrist-pointing experiments: recording format, synthetic experiment, analysis,
 statistics, Donders-fitted predictions and time constants, each against an independent reference
 (hand-written files, SciPy Rotation, solve_ivp of the NumPy λ0-PMP field, scipy.stats, central
 differences)."""
@@ -454,7 +454,8 @@ def test_pipeline_a_net_agrees_with_the_noiseless_model(analysis, noiseless, exp
 def test_predictions_and_captured_counts_equal_a_direct_scipy_computation(analysis, experiment):
     ex, _ = experiment
     pr = fitting.predict_pointing(analysis, ex.truth["KJ"], ex.truth["q_rest"])  # the paper's τ = τ0 = T/5
-    np.testing.assert_allclose(pr.tau0, analysis.T / 5) and np.testing.assert_allclose(pr.tau, analysis.T / 5)
+    np.testing.assert_allclose(pr.tau0, analysis.T / 5)
+    np.testing.assert_allclose(pr.tau, analysis.T / 5)
     assert np.all(pr.status == 0) and pr.path.shape == (2, 16, 20, 2) and pr.q_path.shape == (2, 16, 20, 3)
     for s in range(2):
         count = 0

@@ -28,7 +28,7 @@ N_EQ = 64  # one equilibrium batch shape for the whole module
 
 
 # ----------------------------------------------------------------------------------------------
-# Import: no MuJoCo/MJX until used, and no warp noise (issue 9 item 7)
+# Import: no MuJoCo/MJX until used, and no warp noise
 
 
 def test_import_is_lazy_and_building_the_arm_prints_nothing():

@@ -4,20 +4,13 @@ emitters (``xla_cpu_use_fusion_emitters=False``).
 The fits (Levenberg–Marquardt loops around Newton solves or RK4 simulations), the equilibria and
 the MJX rollouts are compiled once per shape and then run for milliseconds to seconds, so their
 first call is mostly XLA compilation. With the legacy emitters XLA:CPU compiles them 15–55 % faster
-and most of them also run faster (``benchmarks/compile_times.py``, 2026-12-02, idle 2-core Zen 4,
-JAX 0.10.2, compile / run [s], default → this option): ``fit_donders`` 17.4 / 1.99 → 12.7 / 2.02,
-``fit_time_constants`` 14.5 / 1.31 → 13.7 / 0.62, ``rollout_mjx`` 14.1 / 0.117 → 10.7 / 0.029,
-``equilibrium_posture`` 3.1 / 0.004 → 2.4 / 0.002, ``estimate_ik_weights_lm`` 5.1 / 2.80 → 3.9 / 1.15;
-the NIO fit's XLA compilation alone 10.5 → 4.8 s. Results agree to rounding (a different
-fusion, not different arithmetic).
+and most of them also run faster (``benchmarks/compile_times.py``); results agree to rounding (a
+different fusion, not different arithmetic).
 
-Every jitted kernel of ``pmpjax`` and ``fitting`` uses it (the small helpers too: over the test
-suite's 1 100 compilations, 2026-12-02, the redundancy operators' XLA time fell 26 → 14 s, the
-chains' per-item kinematics 13 → 8 s), except where run time at large batches is the point:
-``simulate``'s unrolled RK4 kernel above 1 024 movements (B = 10 000 wrist movements run 1.02 →
-1.35 s with it; below that ``simulate`` runs a compile-light kernel with it, see
-``pmpjax._pmp.simulate._primal_run``) and the IK weights' Algorithm 1 (0.54 → 0.75 s at Fig 1's
-size).
+Every jitted kernel of ``pmpjax`` and ``fitting`` uses it, except where run time at large batches
+is the point: ``simulate``'s unrolled kernel above 1 024 movements (below that ``simulate`` runs a
+compile-light kernel with it, see ``pmpjax._pmp.simulate._primal_run``) and the IK weights'
+Algorithm 1.
 Inside a caller's ``jit`` (or ``vmap``/``grad`` trace) the caller's options apply: JAX takes options
 only at the top level. :func:`fast_compile_applies` tells a kernel whether the top-level call it
 is traced for compiles with :data:`FAST_COMPILE` (``simulate`` picks its kernel by it).

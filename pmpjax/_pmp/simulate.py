@@ -308,21 +308,13 @@ TRACED_SMALL_BATCH = 16
 def _primal_run(statics, traced=False):
     """``_run`` with these static arguments for primal (underived) runs.
 
-    Up to :data:`SMALL_BATCH` movements, where the first call is mostly compilation, the four RK4
-    stages run in a loop (``stage_loop``) and top-level calls compile with ``FAST_COMPILE``: XLA
-    compilation 3.0–3.7 → 1.7–1.9 s at B = 8–1 000 (Figure 3's problem, every step saved, idle
-    2-core Zen 4, 2026-12-02), run time B = 8: 7.7 → 8.5–9.5 ms, B = 1 000: 0.21 → 0.24–0.27 s.
-    Larger batches keep the unrolled stages and XLA's defaults: at B = 10 000 the light kernel
-    runs 15–30 % slower (1.8–2.0 → 2.1–2.3 s) for the same 1.7 s of compilation saved.
-
-    Inside a caller's ``jax.jit`` (``traced``, without ``FAST_COMPILE``) the stage loop under XLA's
-    defaults runs 2–3.5× slower than the unrolled stages from B = 32 on (B = 32, 64, 256, 1 000:
-    11, 21, 70, 226 ms against 4, 6, 32, 80 ms, a jitted loss on the every-step trajectory and a
-    jitted final-only run alike, 2026-12-04) for 0.3–0.7 s less compilation: there the light
-    kernel serves only up to :data:`TRACED_SMALL_BATCH` movements (B = 8: 4 against 3 ms, first
-    call 0.7–1.1 s against 1.0–1.2 s). Inside a caller's ``pj.fast_compile_jit`` (the fits) it
-    keeps :data:`SMALL_BATCH`: B = 64 and 1 000 run 7–8 and 102–111 ms against the unrolled
-    stages' 6 and 96 ms, and compile 0.6 s faster.
+    Up to :data:`SMALL_BATCH` movements, where the first call is mostly compilation, the stages
+    run in a loop (``stage_loop``) and top-level calls compile with ``FAST_COMPILE``: about half
+    the compilation for 10–25 % more run time; larger batches keep the unrolled stages and XLA's
+    defaults. Inside a caller's ``jax.jit`` (``traced``, without ``FAST_COMPILE``) the stage loop
+    runs 2–3.5× slower than the unrolled stages from B = 32 on, so there the light kernel serves
+    only up to :data:`TRACED_SMALL_BATCH` movements; inside a caller's ``pj.fast_compile_jit``
+    (the fits) it keeps :data:`SMALL_BATCH` (``benchmarks/simulate.py``, ``compile_times.py``).
     """
     small = SMALL_BATCH if not traced or fast_compile_applies() else TRACED_SMALL_BATCH
     if math.prod(statics["batch"]) <= small:

@@ -1,0 +1,95 @@
+"""The main job's report rendered from hand-made artefacts: inline code, paper references, wide
+tables, numbers and status codes in tables, links to every file of the output folder."""
+
+import csv
+import json
+import re
+
+import pytest
+
+import pmpjax as pj
+from pmpjax._report import convergence, part_status, write_report
+
+PNG = b"\x89PNG\r\n\x1a\n" + bytes(16)
+
+
+@pytest.fixture
+def report(tmp_path):
+    out = tmp_path
+    (out / "paths.png").write_bytes(PNG)
+    head = ["subject", "status", "n", "value", "big", "tiny", "note"] + [f"extra_{k}" for k in range(30)]
+    rows = [["S01", 0, 42, 0.123456789, 123456.7, 3e-7, "n/a"] + [1.5] * 30,
+            ["S02", int(pj.Status.STALLED), 7, 1234.5678, -2.0, 0.5, "x"] + [2.25] * 30]
+    with (out / "fits.csv").open("w", newline="") as f:
+        csv.writer(f).writerows([head] + rows)
+    (out / "results.json").write_text("{}")
+    (out / "reaching_hugmp_summary.json").write_text("[]")
+    (out / "reaching_hugmp_motions.csv").write_text("a\n1\n")
+    (out / "pointing_data").mkdir()
+    (out / "pointing_data" / "subj1.csv").write_text("t\n0\n")
+    results = {
+        "_meta": {"seed": 0, "quick": True, "versions": {"pmpjax": "0"}},
+        "demo": {"status": "ok", "seconds": 1.0, "doc": "Curvature ``A_net`` per target and `KJ`.", "artefacts": [
+            {"kind": "figure", "path": "paths.png", "caption": "Paths of ``simulate`` runs.",
+             "paper": "Paper Figure 3: curved diagonal paths."},
+            {"kind": "table", "path": "fits.csv", "caption": "Fits (`status` per subject).",
+             "paper": "Williamson (1996) Figure 4."},
+        ]},
+        "unfinished": {"status": "ok", "converged": [1, 4], "seconds": 2.0, "doc": "Some fits.", "artefacts": [],
+                       "results": {"converged": [1, 4]}},
+    }
+    write_report(out, results)
+    return (out / "report.html").read_text(), (out / "report.md").read_text()
+
+
+def test_inline_code_renders_as_code(report):
+    html, md = report
+    for name in ("A_net", "KJ", "simulate", "status"):
+        assert f"<code>{name}</code>" in html
+    assert "`" not in html
+    assert "``A_net``" in md  # (Markdown renders it as code)
+
+
+def test_paper_references_are_labelled_once(report):
+    html, md = report
+    for text in (html, md):
+        assert "Paper: Paper" not in text and "Paper Figure 3: curved diagonal paths." in text
+        assert "Paper: Williamson (1996) Figure 4." in text
+
+
+def test_tables_scroll_inside_their_box(report):
+    html, _ = report
+    assert ".scroll{overflow-x:auto" in html
+    assert html.count("<table") == html.count("<div class='scroll'><table") == 2
+
+
+def test_table_numbers_and_status_codes(report):
+    html, md = report
+    cells = re.findall(r"<td>([^<]*)</td>", html)
+    for shown in ("0.1235", "1235", "123457", "3e-07", "42", "-2", "0.5", "2.25", "SUCCESSFUL", "STALLED", "n/a"):
+        assert shown in cells, shown
+    assert "0.123456789" not in html and "1234.5678" not in html
+    assert "| S02 | STALLED | 7 | 1235 | -2 | 0.5 | x |" in md
+
+
+def test_every_file_of_the_output_folder_is_linked(report):
+    html, md = report
+    for path in ("paths.png", "fits.csv", "results.json", "report.md", "reaching_hugmp_summary.json",
+                 "reaching_hugmp_motions.csv", "pointing_data/subj1.csv"):
+        assert f"href='{path}'" in html, path
+        assert f"]({path})" in md, path
+    others = html.split("Other files in the output folder", 1)[1].split("</ul>", 1)[0]
+    assert "reaching_hugmp_summary.json" in others and "fits.csv" not in others and "paths.png" not in others
+
+
+def test_status_of_parts_whose_fits_did_not_all_converge(report):
+    html, md = report
+    assert "<td class='partial'>ok, 1/4 converged</td>" in html and "<td class='ok'>ok</td>" in html
+    assert "| [unfinished](#unfinished) | ok, 1/4 converged |" in md
+    assert part_status({"status": "ok", "results": {"converged": [True, False, True]}}) == \
+        ("ok, 2/3 converged", "partial")
+    assert part_status({"status": "ok", "converged": [3, 3]}) == ("ok", "ok")
+    assert part_status({"status": "failed"}) == ("failed", "failed")
+    assert convergence({"converged": [[True, True], [False, True]]}) == (3, 4)
+    assert convergence({"converged": [0.5, 1.0]}) is None and convergence({"converged": 3}) is None
+    assert convergence(json.loads(json.dumps({"converged": [True, False]}))) == (1, 2)
