@@ -59,7 +59,7 @@ Arimoto model, RK4 where it is stable and cheaper, as for the time-base generato
 integration error at the optimum (against twice the steps) is checked and reported; above 0.01°
 the step count grows and stage 2 goes on. Both stages hold ``cond(KJ)`` below
 ``stiffness_cond_max`` and the shoulder rest angles within the recorded range ± 20° (penalty
-residuals, zero inside; reported when they bind). Converged means a relative cost change below
+residuals, smooth and negligible inside; reported when they bind). Converged means a relative cost change below
 1e-8 or every parameter within 0.014 standard errors of the optimum (``stol``).
 Standard errors by ``fitting.covariance``; ``aic``/``bic`` from the Gaussian likelihood of the
 residuals (optimistic: samples of one movement are correlated; use them to rank models fitted to
@@ -127,6 +127,9 @@ REST_MARGIN_DEG = 20.0
 #: Weight of the bound residuals [rad per unit of violation]: stiff enough to hold a bound within
 #: about 1 % (the data residual's gradient is O(10)), soft enough for Levenberg–Marquardt.
 BOUND_WEIGHT = 30.0
+#: Softplus widths of the bounds: log cond(KJ) (2 % of the condition number), rest angles [rad];
+#: a bound counts as binding (``bound_active``) within three widths of it or beyond.
+BOUND_WIDTH = (0.02, 0.01)
 GAIN_CAP = 60.0  # 1/T_rec: cap of the time-base generator's task-velocity gain
 FINAL_WEIGHT = 1.0
 MODELS = ("lambda0", "lambda0_minjerk")
@@ -444,12 +447,14 @@ def _equilibria(p, target, q_final):
 
 def _bound_residual(theta, data, cfg: _Config):
     """The bounds as residuals (4,) [rad]: ``BOUND_WEIGHT`` times how far ``log cond(KJ)`` exceeds
-    ``log cond_max``, and how far each shoulder rest angle lies outside ``[lo, hi]`` (zero inside:
-    the fit is unregularised there)."""
+    ``log cond_max``, and how far each shoulder rest angle lies outside ``[lo, hi]``, each through
+    a softplus of width ``BOUND_WIDTH`` (smooth, so Levenberg–Marquardt does not crawl along a
+    kink; negligible a few widths inside, where the fit is unregularised)."""
+    hinge = lambda g, width: width * jax.nn.softplus(g / width)  # noqa: E731
     w = jnp.linalg.eigvalsh(log_stiffness(theta[:_N_K], 4))
-    over_c = jnp.maximum(w[-1] - w[0] - math.log(cfg.cond_max), 0.0) if math.isfinite(cfg.cond_max) else 0.0 * w[0]
+    over_c = hinge(w[-1] - w[0] - math.log(cfg.cond_max), BOUND_WIDTH[0]) if math.isfinite(cfg.cond_max) else 0.0 * w[0]
     q = theta[_N_K:_N_P]
-    over_q = jnp.maximum(q - data["hi"], 0.0) + jnp.maximum(data["lo"] - q, 0.0)
+    over_q = hinge(q - data["hi"], BOUND_WIDTH[1]) + hinge(data["lo"] - q, BOUND_WIDTH[1])
     return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])
 
 
@@ -621,7 +626,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(40, 100), 
     p = len(_param_names(cfg))
     out, s1 = {}, None
     q_final_mean = np.stack([m.q_obs[:, -1].mean(0) for m in motions])
-    out["elbow"] = data["elbow"]
+    out["elbow"], out["lo"], out["hi"] = data["elbow"], data["lo"], data["hi"]
     out["dropped"] = [np.zeros(0, int) for _ in motions]
     if theta0 is None:
         th1 = np.concatenate([np.zeros((S, _N_K)), q_final_mean[:, :3]], -1)
@@ -713,7 +718,8 @@ class ReachingFit:
     fitted model's movements at that step count and at twice as many [deg] (NaN without stage 2).
     Bounds: ``stiffness_cond`` (S,) cond(KJ) with its bound ``stiffness_cond_max``;
     ``bound_active`` (S, 4) bool: the bound on cond(KJ) and on each shoulder rest angle binds at
-    the optimum (the fit presses against it: the data alone would go beyond).
+    the optimum (within three softplus widths of it or beyond: the fit presses against it, the
+    data alone would go further).
     """
 
     subjects: tuple[str, ...]
@@ -941,7 +947,7 @@ def fit_reaching(
       ``KJ`` and ``q_rest`` poorly determined (one redundant joint: one equation per posture), and
       unbounded stage-1 fits drift to near-singular stiffness (cond 6 400 for S01) and rest angles
       far outside the joint range; the bound, and the recorded joint range widened by 20° for the
-      shoulder rest angles, hold them (penalty residuals, zero inside; ``bound_active`` reports
+      shoulder rest angles, hold them (smooth penalty residuals, negligible inside; ``bound_active`` reports
       where a bound binds at the optimum).
 
     **Cost** (2 idle cores, the four bundled subjects, every task, repetitions 1–7, 747 motions,
@@ -1067,7 +1073,10 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         integration[a] = out["integration_error_deg"][k]
         ev = np.linalg.eigvalsh(pars["KJ"])
         cond[a] = ev[-1] / ev[0]
-        active[a] = out["residual"][k][-4:] > 0
+        log_over = np.log(cond[a]) - np.log(cfg.cond_max)
+        q3 = pars["q_rest"][:3]
+        wc, wq = 3 * BOUND_WIDTH[0], 3 * BOUND_WIDTH[1]
+        active[a] = np.r_[log_over > -wc, (q3 - out["hi"][k] > -wq) | (out["lo"][k] - q3 > -wq)]
         status[a] = int(out["status"][k]) if np.isfinite(cost) else int(Status.NONFINITE)
     return ReachingFit(
         subjects=tuple(names), converged=status == 0, status=status, param_names=_param_names(cfg),

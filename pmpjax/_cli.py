@@ -240,7 +240,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
 
 #: Wall seconds per part of idle cold runs, two parts at a time (``--jobs 2``, 2-core AMD EPYC Zen 4
 #: KVM): the order in which parallel workers take the parts (longest first) when ``results.json``
-#: has no times yet; ``--quick`` and the full run (``--no-cache``, pinned workers, 2026-12-04).
+#: has no times yet; ``--quick`` and the full run (``--no-cache``, pinned workers).
 PART_SECONDS = {"pointing": 33, "reaching": 27, "sweeps": 16, "primitives": 8, "ik_figures": 8,
                 "ik_hugmp": 8, "ik_synthetic": 8, "figure3": 4, "donders_nio": 3, "figure4": 1}
 #: Parts that reuse another part's compilations (donders_nio's NIO fit has the shapes of
@@ -272,14 +272,8 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     (module-level functions or entry points); a worker that crashes fails its part, the others
     still run.
 
-    Measured (2-core AMD EPYC Zen 4 KVM, idle, 2026-12-04, ``jobs=2``, pinned workers): the full
-    run cold (``--no-cache``) 106 s wall / 183 s user CPU (the previous stop's code in the same
-    session: 127 s / 222 s), with a fresh cache 109 s, warm (a second run) 83 s (bound by
-    ik_hugmp's bootstrap, 66–74 s of computing); ``--quick`` cold 47–56 s / 85–100 s, with a fresh
-    cache 56–60 s, warm 27–29 s / 43–46 s. (On 2026-12-02 the machine was about twice as slow:
-    the full run cold 181 s, ``--quick`` 112 s.) On cores shared with other jobs (load 5–9) a
-    second worker gained nothing (2026-12-02: cold ``--quick`` ``jobs=2`` 782 s / 512 s; warm
-    cache ``jobs=1`` 240 s / 139 s, ``jobs=2`` 237 s / 159 s).
+    Run times on two idle cores: the README (targets five minutes full, one minute ``--quick``);
+    on cores shared with other jobs a second worker gains nothing.
     """
     import jax
 
@@ -405,10 +399,9 @@ def _pin_to_share(slot: int, n_workers: int) -> None:
     disjoint shares; one core each when there are more workers than cores).
 
     XLA sizes its CPU thread pools by the cores a process may use, so unpinned workers each run
-    as many threads as there are cores and the two workers of a 2-core run take turns on both:
-    cold ``reproduce --quick --jobs 2``, alternating runs, unpinned 54.7 s and 49.3 s wall (98.6,
-    88.6 s CPU), pinned 47.4 s and 48.5 s (84.5, 87.3 s CPU) (2-core Zen 4, idle, 2026-12-04).
-    Linux only (elsewhere a no-op)."""
+    as many threads as there are cores and the two workers of a 2-core run take turns on both
+    (pinned, a cold ``--quick`` run took about 7 % less wall and CPU time). Linux only (elsewhere
+    a no-op)."""
     if not hasattr(os, "sched_setaffinity"):
         return
     cores = sorted(os.sched_getaffinity(0))

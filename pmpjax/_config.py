@@ -119,6 +119,13 @@ def check_keys(cfg: dict, path, extra_tables=()) -> None:
                                   f"{', '.join(sorted(KNOWN_KEYS[table]))}")
 
 
+def read_simulation_config(path):
+    """``(model, planner, q0, targets, options)`` of a simulation file (TOML or JSON, the format of
+    ``pmpjax simulate``; ``options``: ``duration``, ``dt``, ``every``, ``names``). Raises
+    ``ValueError`` naming the file and the key (unknown keys too)."""
+    return build_simulation(read_config(path), path)
+
+
 def build_simulation(cfg: dict, path="<config>", extra_tables=()):
     """``(model, planner, q0, targets, options)`` from a parsed configuration."""
     import pmpjax as pj

@@ -362,9 +362,14 @@ def test_simulate_command_ends_in_the_donders_posture(tmp_path):
     ("[model]\nKJ = [[1, 2, 0], [0, 1, 0], [0, 0, 1]]\n", "KJ"),
     ("[chain]\ntype = 'hand'\n", "chain.type"),
 ])
+@pytest.mark.bad_input("pj.read_simulation_config")
 def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, key):
+    import pmpjax as pj
+
     path = tmp_path / "bad.toml"
     path.write_text(text)
     assert _cli.main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and key in err and "Traceback" not in err
+    with pytest.raises(ValueError, match=key):
+        pj.read_simulation_config(path)

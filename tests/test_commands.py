@@ -83,12 +83,16 @@ def test_ik_weights_command_recovers_the_weights_of_the_example(tmp_path):
     ("ik-weights", "item,qdot_1,qdot_2,xdot_1,J_1_1,J_1_2\na,0.1,0.2,zz,1,0\n", "line 2, column 4"),
     ("ik-weights", "item,qdot_1,qdot_2\na,0.1,0.2\n", "header"),
 ])
+@pytest.mark.bad_input("fitting.read_ik_file")
 def test_commands_reject_malformed_files_with_file_line_and_column(tmp_path, capsys, command, content, expect):
     path = tmp_path / "bad.csv"
     path.write_text(content)
     assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and expect in err and "Traceback" not in err
+    if command == "ik-weights":
+        with pytest.raises(ValueError, match=expect):
+            fitting.read_ik_file(path)
 
 
 def test_commands_have_help(capsys):

@@ -10,11 +10,14 @@ with complex-step Jacobians and central differences (``_reference``); NumPy's we
 pseudo-inverse formula.
 """
 
+from importlib import resources
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pytest
 import scipy.io
-from _reference import arm4_fk, arm4_jac, weighted_pinv
+from _reference import arm4_fk, arm4_jac, planar_jac, weighted_pinv
 from scipy.signal import savgol_filter
 
 import fitting
@@ -515,6 +518,58 @@ def test_prosthetic_conditions_and_eq25():
     assert np.isclose(w[lock, 2], 1.0)  # a locked elbow is the costliest joint
     beta = np.asarray(fitting.contribution_coefficients(w))
     assert beta[assist, 2] > beta[coup, 2] and beta[assist, 0] < beta[coup, 0]
+
+
+# The shipped ik-weights example (pmpjax/data/examples/ik_example.csv), written by
+# ``_write_ik_example`` from this recipe: a planar 3-link arm with links of 0.3 m at 150 postures
+# per item (q1 anywhere, the two distal joints bent 0.3–2.6 rad, away from the stretched-arm
+# singularity), hand velocities ẋ ~ N(0, 0.3² I) and q̇ = J#_W ẋ (no null-space motion).
+IK_EXAMPLE_W = {"arm_a": (1.0, 0.5, 0.2), "arm_b": (0.3, 1.0, 0.6)}
+IK_EXAMPLE_HEADER = (
+    "# pmpjax ik-weights example: planar 3-link arm (links 0.3 m), qdot = J#_W xdot with W = diag(w), "
+    "gamma = 0 (no null-space motion)\n"
+    "# arm_a: w = (1, 0.5, 0.2); arm_b: w = (0.3, 1, 0.6); 150 postures each, q1 in [-pi, pi], "
+    "q2 and q3 in [0.3, 2.6] rad\n")
+
+
+def _ik_example_arrays(seed=0, K=150):
+    rng = np.random.default_rng(seed)
+    out = {}
+    for item, w in IK_EXAMPLE_W.items():
+        q = rng.uniform((-np.pi, 0.3, 0.3), (np.pi, 2.6, 2.6), (K, 3))
+        J = np.stack([planar_jac(a, (0.3, 0.3, 0.3)) for a in q])
+        xd = 0.3 * rng.standard_normal((K, 2))
+        out[item] = (np.einsum("kij,kj->ki", weighted_pinv(J, np.array(w)), xd), xd, J)
+    return out
+
+
+def _write_ik_example(path):
+    cols = ["item"] + [f"qdot_{i}" for i in (1, 2, 3)] + [f"xdot_{i}" for i in (1, 2)] + [
+        f"J_{r}_{c}" for r in (1, 2) for c in (1, 2, 3)]
+    lines = [",".join(cols)]
+    for item, (qd, xd, J) in _ik_example_arrays().items():
+        for k in range(len(qd)):
+            vals = np.concatenate([qd[k], xd[k], J[k].reshape(-1)])
+            lines.append(",".join([item] + [f"{v:.15g}" for v in vals]))
+    Path(path).write_text(IK_EXAMPLE_HEADER + "\n".join(lines) + "\n")
+
+
+def test_ik_example_file_follows_its_recipe_and_algorithm1_converges_on_it(tmp_path):
+    """The shipped example holds the recipe's arrays (NumPy: planar Jacobians, weighted
+    pseudo-inverse; ẋ = J q̇), and the command's default method, Algorithm 1 at γ = 0.6 with the
+    default tolerances, converges on it (SUCCESSFUL) to the weights that made the data, within
+    2·10⁻³ relative (the default ``tol`` is 10⁻³ relative to the fixed point, here the truth)."""
+    path = resources.files("pmpjax") / "data" / "examples" / "ik_example.csv"
+    assert path.read_text().startswith(IK_EXAMPLE_HEADER)
+    _write_ik_example(tmp_path / "ik_example.csv")
+    d, again = fitting.read_ik_file(path), fitting.read_ik_file(tmp_path / "ik_example.csv")
+    assert d["labels"] == again["labels"] == list(IK_EXAMPLE_W) and d["mask"].all()
+    for key in ("qdot", "xdot", "J"):
+        np.testing.assert_allclose(d[key], again[key], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(np.einsum("bkij,bkj->bki", d["J"], d["qdot"]), d["xdot"], atol=1e-12)
+    res = fitting.estimate_ik_weights(d["qdot"], d["xdot"], d["J"], 0.6, mask=d["mask"], on_invalid="flag")
+    assert np.all(np.asarray(res.status) == pj.Status.SUCCESSFUL)
+    np.testing.assert_allclose(res.w, np.array(list(IK_EXAMPLE_W.values())), rtol=2e-3)
 
 
 @pytest.mark.bad_input("fitting.prosthetic_simulation", "fitting.synthetic_ik_dataset", "fitting.ik_fig1_data",

@@ -460,13 +460,14 @@ def test_bad_input(folders, clean_fit):
 
 def test_stiffness_bound_holds_and_is_reported(folders):
     # Stage 1 (final postures) of S02, tasks 1-2: without a bound cond(KJ) goes to ~40; a bound of
-    # 1.2 must hold (to the penalty's ~1 % slack) and be reported as binding. cond(KJ) from NumPy.
+    # 1.2 must hold (to a few of its softplus widths of 2 % inside and the penalty's ~1 % slack
+    # outside) and be reported as binding. cond(KJ) from NumPy.
     opts = dict(SMALL, tasks=(1, 2), max_steps=(40, 0), directory=folders["clean"])
     free = fitting.fit_reaching([2], stiffness_cond_max=None, **opts)
     tight = fitting.fit_reaching([2], stiffness_cond_max=1.2, **opts)
     cond = lambda K: np.linalg.eigvalsh(K)[-1] / np.linalg.eigvalsh(K)[0]  # noqa: E731
     assert cond(free.KJ[0]) > 10 and not free.bound_active[0, 0]
-    assert 1.2 * 0.99 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
+    assert 1.2 * 0.93 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
     assert tight.stiffness_cond[0] == pytest.approx(cond(tight.KJ[0])) and tight.stiffness_cond_max == 1.2
     # the rest-angle bounds: the subject's recorded range widened by REST_MARGIN_DEG, held likewise
     m = R._motions(2, folders["clean"], SMALL["reps"], (1, 2))
@@ -476,8 +477,8 @@ def test_stiffness_bound_holds_and_is_reported(folders):
     for f in (free, tight):
         q = f.q_rest[0, :3]
         assert np.all((q > lo - slack) & (q < hi + slack))
-        assert np.array_equal(f.bound_active[0, 1:], (q <= lo) | (q >= hi))
-    assert free.bound_active[0, 1:].any()  # this subject presses against one
+        w = 3 * R.BOUND_WIDTH[1]
+        assert np.array_equal(f.bound_active[0, 1:], (q < lo + w) | (q > hi - w))
 
 
 def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fit):
