@@ -274,8 +274,8 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     to ``samples`` points), fixes the over-specified elbow at 1 (Experiment-1 convention) and runs
     one vectorised bootstrap over motions (trials). Returns ``dict(w, lo, hi (N, 6[, M], 4),
     status (N, 6[, M]) the ``pj.Status`` of the point estimate, converged (N, 6[, M]) the fraction of
-    bootstrap replicates that met the error tolerance, stalled (N, 6[, M]) the fraction that ended
-    at a fixed point, subjects, fixed, skipped {subject: [...]}, notes, failed {subject: message})``;
+    bootstrap replicates that converged (``SUCCESSFUL``), stalled (N, 6[, M]) the fraction that
+    ended ``STALLED``, subjects, fixed, skipped {subject: [...]}, notes, failed {subject: message})``;
     a subject that cannot be loaded is reported in ``failed`` and left out.
     """
     from .analysis import bootstrap_ik_weights, overspecified_joints
