@@ -191,7 +191,7 @@ def test_every_file_reading_subcommand_names_its_example_and_columns(capsys):
         out = capsys.readouterr().out
         shown = re.search(r"Example: (\S+)", out.replace("\n", " "))
         assert shown and Path(shown.group(1)).name == name and Path(shown.group(1)).is_file(), (command, out)
-        assert "cp " in out
+        assert "cp " in out.replace("\n", " ")
     for command, columns in (("fit-donders", "subject,sample,qw,qx,qy,qz,x1,x2"),
                              ("analyze-pointing", "subject,trial,time,qw,qx,qy,qz,target")):
         with pytest.raises(SystemExit):
