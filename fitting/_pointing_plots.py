@@ -13,7 +13,7 @@ from pmpjax import DIRECTIONS
 
 from ._pointing import PointingAnalysis, PointingPrediction
 
-_JOINTS = ("PS", "FE", "RUD")
+_JOINT_NAMES = ("pronation–supination", "flexion–extension", "radial–ulnar deviation")
 _JOINT_COLORS = ("tab:red", "tab:purple", "tab:green")
 
 
@@ -31,6 +31,12 @@ def _check(analysis, prediction, subject, alpha):
     if not (np.isfinite(alpha) and 0 < alpha < 1):
         raise ValueError(f"`alpha` must lie in (0, 1), got {alpha}")
     return analysis.subject_index(subject)
+
+
+def Line2D(*args, **kw):  # noqa: N802 - legend handles; matplotlib imported when drawing
+    from matplotlib.lines import Line2D as line
+
+    return line(*args, **kw)
 
 
 def _figure(fig, **kw):
@@ -70,9 +76,15 @@ def plot_pointing_paths(analysis, prediction=None, *, subject=0, alpha: float = 
         if np.isfinite(analysis.p_hyst[s, i]) and analysis.p_hyst[s, i] < alpha:
             ax.plot(*(tgt * 0.55), marker="*", color="k", ms=9)
     ax.scatter(*np.vstack([analysis.targets[::2, 1], [[0.0, 0.0]]]).T, s=60, facecolors="none", edgecolors="k")
-    ax.set(aspect="equal", xlabel="x1 [m]", ylabel="x2 [m]",
-           title=f"{analysis.subjects[s]}: mean paths ± sd (thick: A_net ≠ 0; *: hysteresis; -- model)")
-    ax.title.set_fontsize(9)
+    ax.set(aspect="equal", xlabel="x1 [m]", ylabel="x2 [m]")
+    ax.set_title(f"{analysis.subjects[s]}: mean paths ± sd", fontsize=9)
+    handles = [Line2D([], [], color="tab:blue", label="outbound"), Line2D([], [], color="tab:red", label="inbound"),
+               Line2D([], [], color="0.3", lw=3.0, label=f"A_net ≠ 0 (p < {alpha})"),
+               Line2D([], [], color="k", marker="*", ls="", ms=8, label=f"hysteresis (p < {alpha})")]
+    if prediction is not None:
+        handles.append(Line2D([], [], color="0.3", ls="--", label="model"))
+    ax.legend(handles=handles, fontsize=7, loc="lower left", bbox_to_anchor=(1.0, 0.0), frameon=False)
+    fig.tight_layout()
     return fig
 
 
@@ -117,17 +129,20 @@ def plot_pointing_joints(analysis, prediction=None, *, subject=0, labels=("out-E
     for ax, lab in zip(axes, labels):
         j = analysis.labels.index(lab)
         t = np.linspace(0.0, analysis.T[s, j], n) if np.isfinite(analysis.T[s, j]) else np.linspace(0, 1, n)
-        for i, (name, c) in enumerate(zip(_JOINTS, _JOINT_COLORS)):
+        for i, c in enumerate(_JOINT_COLORS):
             m, sd = np.rad2deg(analysis.mean_q[s, j, :, i]), np.rad2deg(analysis.sd_q[s, j, :, i])
             ax.fill_between(t, m - sd, m + sd, color=c, alpha=0.2, lw=0)
-            ax.plot(t, m, color=c, label=name)
+            ax.plot(t, m, color=c)
             if prediction is not None:
                 tp = np.linspace(0.0, prediction.duration[s, j], n)
                 ax.plot(tp, np.rad2deg(prediction.q_path[s, j, :, i]), color=c, ls="--")
         ax.set(title=lab, xlabel="time [s]")
     axes[0].set_ylabel("joint angle [deg]")
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"{analysis.subjects[s]}: joint trajectories (-- model)", fontsize=9)
+    handles = [Line2D([], [], color=c, label=f"{name} (mean ± sd)") for name, c in zip(_JOINT_NAMES, _JOINT_COLORS)]
+    if prediction is not None:
+        handles.append(Line2D([], [], color="0.3", ls="--", label="model"))
+    axes[-1].legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+    fig.suptitle(f"{analysis.subjects[s]}: joint trajectories", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -155,6 +170,10 @@ def plot_pointing_speed(analysis, prediction=None, *, subject=0, alpha: float = 
         ax.set_xlabel("time [s]", fontsize=8)
     for ax in axes[:, 0]:
         ax.set_ylabel("speed [m/s]", fontsize=8)
-    fig.suptitle(f"{analysis.subjects[s]}: tangential speed (mean ± sd; -- model)", fontsize=9)
+    handles = [Line2D([], [], color="k", label="data (mean ± sd)")]
+    if prediction is not None:
+        handles.append(Line2D([], [], color="tab:orange", ls="--", label="model"))
+    fig.legend(handles=handles, fontsize=7, loc="upper right", frameon=False)
+    fig.suptitle(f"{analysis.subjects[s]}: tangential speed", fontsize=9)
     fig.tight_layout()
     return fig

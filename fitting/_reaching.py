@@ -1306,7 +1306,7 @@ def plot_reaching_subject(pred: ReachingPrediction, subject, *, predictors=("mod
             ax.plot(s, np.rad2deg(pred.q_obs[k, :, j]), color="k", lw=1.5)
             for n in predictors:
                 ax.plot(s, np.rad2deg(preds[n].q_pred[k, :, j]), lw=1, **styles[n])
-        ax.set_title(f"{JOINTS[j]} [deg]")
+        ax.set_title(f"{pj.ShoulderElbowArm.joint_names[j]} [deg]", fontsize=10)
         ax.set_xlabel("normalised time")
     views = ((1, 2, "frontal: y (left) vs z (up) [m]"), (0, 2, "sagittal: x (forward) vs z [m]"))
     for col, (a, b, lab) in enumerate(views):

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-HUGMP_JOINTS = ("q1 sh. abd.", "q2 sh. flex.", "q3 sh. rot.", "q4 elbow")
+import pmpjax as pj
+
+HUGMP_JOINTS = pj.ShoulderElbowArm.joint_names
 
 
 def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUGMP_JOINTS,

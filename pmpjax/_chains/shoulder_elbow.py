@@ -42,6 +42,10 @@ class ShoulderElbowArm(Chain):
     The Jacobian loses rank with the elbow straight (q4 = 0).
     """
 
+    #: Plot labels of q1..q4 with the sign of each movement (class attribute, not a field).
+    joint_names = ("q1 shoulder abd.(−)/add.(+)", "q2 shoulder flex.(−)/ext.(+)",
+                   "q3 shoulder int.(−)/ext.(+) rot.", "q4 elbow flexion (+)")
+
     L1: jax.Array = 0.30
     L2: jax.Array = 0.33
     n: int = static_field(default=4)
