@@ -1,6 +1,6 @@
 """fitting: batched, differentiable parameter fits built on pmpjax (never imported by pmpjax)."""
 
-from ._commands import read_ik_file as read_ik_file
+from ._app.commands import read_ik_file as read_ik_file
 from ._donders import DondersFit as DondersFit
 from ._donders import coefficient_names as coefficient_names
 from ._donders import donders_coefficients as donders_coefficients

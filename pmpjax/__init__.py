@@ -116,4 +116,4 @@ from ._wrist.subjects import paper_subjects as paper_subjects
 from ._wrist.subjects import subject_names as subject_names
 
 __version__ = "0.1.0"
-from ._config import read_simulation_config as read_simulation_config
+from ._app.simulate import read_simulation_config as read_simulation_config

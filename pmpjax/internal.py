@@ -8,6 +8,15 @@ part of the stable API — names here may change between releases without deprec
 
 # jax.jit for compile-bound kernels (fits, equilibria, MJX rollouts; pmpjax/_base/compile.py)
 # Leading batch axes and padding (pmpjax/_base/batching.py)
+# The main job's part protocol (``pmpjax.jobs`` entry points)
+from ._app.parts import Part as Part
+from ._app.parts import PartContext as PartContext
+
+# Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
+from ._app.simulate import ConfigError as ConfigError
+from ._app.simulate import build_simulation as build_simulation
+from ._app.simulate import example_help as example_help
+from ._app.simulate import read_config as read_config
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
 from ._base.batching import on_host as on_host
@@ -36,6 +45,7 @@ from ._base.validate import as_array as as_array
 from ._base.validate import check_finite_masked as check_finite_masked
 from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int
+from ._base.validate import check_prng_key as check_prng_key
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import input_file as input_file
@@ -44,12 +54,6 @@ from ._base.validate import output_dir as output_dir
 from ._base.validate import read_text_file as read_text_file
 from ._base.validate import to_jax as to_jax
 from ._base.validate import warn_without_x64 as warn_without_x64
-
-# Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
-from ._config import ConfigError as ConfigError
-from ._config import build_simulation as build_simulation
-from ._config import example_help as example_help
-from ._config import read_config as read_config
 
 # Data
 from ._data.hugmp import hugmp_directory as hugmp_directory

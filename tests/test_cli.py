@@ -12,7 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from pmpjax import _cli
+from pmpjax._app import cli, figures
+from pmpjax._app import reproduce as main_job
+from pmpjax._app.display import Display
+from pmpjax._app.parts import Part
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -20,7 +23,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
-    res = _cli.reproduce(out, quick=True, only=["figure3", "figure4"], progress=False, cache=False, jobs=1)
+    res = cli.reproduce(out, quick=True, only=["figure3", "figure4"], progress=False, cache=False, jobs=1)
     return out, res
 
 
@@ -56,9 +59,9 @@ def test_rerun_skips_finished_parts_unless_forced(run_dir):
     out, _ = run_dir
     png = out / "figure4_summed_moves.png"
     before = png.stat().st_mtime_ns
-    _cli.reproduce(out, quick=True, only=["figure4"], progress=False, cache=False)
+    cli.reproduce(out, quick=True, only=["figure4"], progress=False, cache=False)
     assert png.stat().st_mtime_ns == before
-    _cli.reproduce(out, quick=True, only=["figure4"], force=True, progress=False, cache=False)
+    cli.reproduce(out, quick=True, only=["figure4"], force=True, progress=False, cache=False)
     assert png.stat().st_mtime_ns > before
 
 
@@ -67,9 +70,9 @@ def test_a_failing_part_is_reported_and_the_others_run(tmp_path, monkeypatch):
         """A part that fails."""
         raise RuntimeError("boom")
 
-    parts = {"broken": broken, "figure4": _cli.figure4_part}
-    monkeypatch.setattr(_cli, "available_parts", lambda: parts)
-    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
+    parts = {"broken": broken, "figure4": figures.figure4}
+    monkeypatch.setattr(main_job, "available_parts", lambda: parts)
+    res = cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
     assert res["broken"]["status"] == "failed" and "boom" in res["broken"]["error"]
     assert "RuntimeError" in (tmp_path / "broken.error.txt").read_text()
     assert res["figure4"]["status"] == "ok"
@@ -88,8 +91,8 @@ def _converged_part(ctx):
 
 def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, capsys):
     parts = {"partial": _unconverged_part, "whole": _converged_part}
-    monkeypatch.setattr(_cli, "available_parts", lambda: parts)
-    _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
+    monkeypatch.setattr(main_job, "available_parts", lambda: parts)
+    cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
     saved = json.loads((tmp_path / "results.json").read_text())
     assert saved["partial"]["status"] == "ok" and saved["partial"]["converged"] == [0, 3]
     assert saved["partial"]["all_converged"] is False
@@ -104,7 +107,7 @@ def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, c
 
 
 def test_the_progress_display_counts_the_parts_done():
-    ui = _cli._UI(True)
+    ui = Display(True)
     try:
         ui.begin(3)
         ui.part_done("a", {"status": "ok", "seconds": 1.0})
@@ -146,8 +149,8 @@ def _affinity_part(ctx):
 def test_two_workers_run_on_disjoint_cores(tmp_path, monkeypatch):
     """Each of two workers is pinned to its half of the cores (unpinned, XLA gives each worker a
     thread per core and the two compete for both)."""
-    monkeypatch.setattr(_cli, "available_parts", lambda: {"a": _affinity_part, "b": _affinity_part})
-    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    monkeypatch.setattr(main_job, "available_parts", lambda: {"a": _affinity_part, "b": _affinity_part})
+    res = cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
     a, b = res["a"]["results"], res["b"]["results"]
     assert a["pid"] != b["pid"]
     usable = sorted(os.sched_getaffinity(0))
@@ -163,12 +166,13 @@ def _timed_part(ctx):
 
 
 def test_a_follower_part_runs_after_its_leader_on_the_leaders_worker(tmp_path, monkeypatch):
-    """FOLLOWS (donders_nio after pointing, whose NIO compilation it reuses): submitted second, the
-    follower would start at once on the other worker; it waits and runs where its leader ran."""
+    """A part that ``follows`` another (donders_nio after pointing, whose NIO compilation it
+    reuses): submitted second, it would start at once on the other worker; it waits and runs
+    where its leader ran."""
     names = ["lead", "follower", "o1", "o2", "o3"]
-    monkeypatch.setattr(_cli, "available_parts", lambda: dict.fromkeys(names, _timed_part))
-    monkeypatch.setattr(_cli, "FOLLOWS", {"follower": "lead"})
-    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    parts = {**dict.fromkeys(names, _timed_part), "follower": Part(_timed_part, follows="lead")}
+    monkeypatch.setattr(main_job, "available_parts", lambda: parts)
+    res = cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
     r = {n: res[n]["results"] for n in names}
     assert all(res[n]["status"] == "ok" for n in names)
     assert r["follower"]["pid"] == r["lead"]["pid"] and r["follower"]["start"] >= r["lead"]["end"]
@@ -181,8 +185,8 @@ def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, mon
     # "tiny" as an installed package registers it (pmpjax.jobs entry point): the worker loads it.
     tiny = EntryPoint(name="tiny", value=f"{__name__}:_tiny_part", group="pmpjax.jobs")
     parts = {"raising": _raising_part, "crashing": _crashing_part, "tiny": tiny}
-    monkeypatch.setattr(_cli, "available_parts", lambda: parts)
-    res = _cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
+    monkeypatch.setattr(main_job, "available_parts", lambda: parts)
+    res = cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
     assert res["_meta"]["jobs"] == 2
     assert res["raising"]["status"] == "failed" and "boom in a worker" in res["raising"]["error"]
     assert "RuntimeError" in (tmp_path / "raising.error.txt").read_text()
@@ -204,7 +208,7 @@ def test_two_workers_give_the_numbers_of_one_process(run_dir, tmp_path, monkeypa
     monkeypatch.setenv("PMPJAX_CACHE_DIR", jax.config.jax_compilation_cache_dir)
     min_time = jax.config.jax_persistent_cache_min_compile_time_secs
     try:
-        res2 = _cli.reproduce(tmp_path, quick=True, only=["figure3", "figure4"], progress=False, jobs=2)
+        res2 = cli.reproduce(tmp_path, quick=True, only=["figure3", "figure4"], progress=False, jobs=2)
     finally:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", min_time)
     assert res2["_meta"]["jobs"] == 2
@@ -216,12 +220,12 @@ def test_two_workers_give_the_numbers_of_one_process(run_dir, tmp_path, monkeypa
 def test_an_interrupted_run_keeps_the_parts_already_written(tmp_path):
     script = textwrap.dedent(f"""
         import time
-        from pmpjax import _cli
+        from pmpjax._app import figures, reproduce as main_job
         def hang(ctx):
             '''Never ends.'''
             time.sleep(600)
-        _cli.available_parts = lambda: {{"figure4": _cli.figure4_part, "hang": hang}}
-        _cli.reproduce({str(tmp_path)!r}, quick=True, progress=False, cache=False)
+        main_job.available_parts = lambda: {{"figure4": figures.figure4, "hang": hang}}
+        main_job.reproduce({str(tmp_path)!r}, quick=True, progress=False, cache=False)
     """)
     proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"})
     results = tmp_path / "results.json"
@@ -264,9 +268,9 @@ def test_terminating_the_command_stops_its_worker_processes(tmp_path):
         import sys
         sys.path.insert(0, {str(tmp_path)!r})
         import sleepers
-        from pmpjax import _cli
-        _cli.available_parts = lambda: {{"a": sleepers.sleeper, "b": sleepers.sleeper}}
-        _cli.reproduce({str(tmp_path / "out")!r}, quick=True, progress=False, cache=False, jobs=2)
+        from pmpjax._app import reproduce as main_job
+        main_job.available_parts = lambda: {{"a": sleepers.sleeper, "b": sleepers.sleeper}}
+        main_job.reproduce({str(tmp_path / "out")!r}, quick=True, progress=False, cache=False, jobs=2)
     """)
     proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"})
     pids = []
@@ -293,12 +297,12 @@ def test_terminating_the_command_stops_its_worker_processes(tmp_path):
 
 
 def test_command_line_bad_input_is_one_line_and_exit_2(capsys, tmp_path, monkeypatch):
-    assert _cli.main(["reproduce", "--only", "no_such_part", "--no-cache"]) == 2
+    assert cli.main(["reproduce", "--only", "no_such_part", "--no-cache"]) == 2
     err = capsys.readouterr().err
     assert "no_such_part" in err and "Traceback" not in err
     # a bare `pmpjax` prints its usage and starts nothing (no `out/` in the current folder)
     monkeypatch.chdir(tmp_path)
-    assert _cli.main([]) == 2
+    assert cli.main([]) == 2
     err = capsys.readouterr().err
     assert "usage:" in err and "--out DIR" in err and not any(tmp_path.iterdir())
 
@@ -311,7 +315,7 @@ def _example(name):
 
 def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys):
 
-    assert _cli.main(["simulate", _example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 0
+    assert cli.main(["simulate", _example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
     assert len(s["targets"]) == 8 and max(s["final_task_error"]) < 1e-6
     lines = (tmp_path / "trajectories.csv").read_text().splitlines()
@@ -335,7 +339,7 @@ def test_simulate_command_ends_in_the_donders_posture(tmp_path):
         "simulation": {"q0_deg": [0, 10, -5], "targets": [target.tolist()] * 8, "duration": 1.6, "dt": 0.004,
                        "save_every": 10},
     }))
-    assert _cli.main(["simulate", str(cfg), "--out", str(tmp_path / "o")]) == 0
+    assert cli.main(["simulate", str(cfg), "--out", str(tmp_path / "o")]) == 0
     q_end = np.asarray(json.loads((tmp_path / "o" / "summary.json").read_text())["final_q"][0])
 
     def fk(q):  # R = Rx(−q_PS) Rz(q_FE) Ry(q_RUD); x = [[0, −1, 0], [0, 0, 1]] R e_x (d = 1)
@@ -368,7 +372,7 @@ def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, 
 
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    assert _cli.main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert cli.main(["simulate", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and key in err and "Traceback" not in err
     with pytest.raises(ValueError, match=key):

@@ -10,7 +10,7 @@ import pytest
 
 import fitting
 import pmpjax as pj
-from pmpjax import _cli
+from pmpjax._app import cli
 
 
 def example(name):
@@ -46,7 +46,7 @@ def test_fit_donders_command_on_the_shipped_example(tmp_path, monkeypatch):
 
     monkeypatch.setattr(fitting._donders, "fit_donders", fake_fit)
     # exit code 1: not every subject converged
-    assert _cli.main(["fit-donders", example("donders_example.csv"), "--out", str(tmp_path), "--starts", "3"]) == 1
+    assert cli.main(["fit-donders", example("donders_example.csv"), "--out", str(tmp_path), "--starts", "3"]) == 1
     assert calls == [3]
     rows = read_rows(tmp_path / "donders_fit.csv")
     assert [r["subject"] for r in rows] == ["subj1", "subj2"]
@@ -68,7 +68,7 @@ def test_fit_donders_command_on_the_shipped_example(tmp_path, monkeypatch):
 def test_ik_weights_command_recovers_the_weights_of_the_example(tmp_path):
     # ik_example.csv: a planar 3-link arm whose joint velocities are W-weighted pseudo-inverse
     # solutions (γ = 0) with w = (1, 0.5, 0.2) and (0.3, 1, 0.6), generated with plain NumPy.
-    assert _cli.main(["ik-weights", example("ik_example.csv"), "--method", "lm", "--gamma", "0",
+    assert cli.main(["ik-weights", example("ik_example.csv"), "--method", "lm", "--gamma", "0",
                       "--out", str(tmp_path)]) == 0
     rows = read_rows(tmp_path / "ik_weights.csv")
     w = np.array([[float(r[f"w_{j}"]) for j in (1, 2, 3)] for r in rows])
@@ -87,7 +87,7 @@ def test_ik_weights_command_recovers_the_weights_of_the_example(tmp_path):
 def test_commands_reject_malformed_files_with_file_line_and_column(tmp_path, capsys, command, content, expect):
     path = tmp_path / "bad.csv"
     path.write_text(content)
-    assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    assert cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and expect in err and "Traceback" not in err
     if command == "ik-weights":
@@ -98,7 +98,7 @@ def test_commands_reject_malformed_files_with_file_line_and_column(tmp_path, cap
 def test_commands_have_help(capsys):
     for command in ("reproduce", "simulate", "fit-donders", "ik-weights"):
         with pytest.raises(SystemExit) as e:
-            _cli.main([command, "--help"])
+            cli.main([command, "--help"])
         assert e.value.code == 0
         assert command in capsys.readouterr().out
 
@@ -129,7 +129,7 @@ def test_every_subcommand_refuses_bad_files_by_name(tmp_path, capsys, command, n
     else:
         assert rename[0] in good
         path.write_text(good.replace(rename[0], rename[1], 1))
-    assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    assert cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert path.name in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     if spoil == "renamed":
@@ -138,7 +138,7 @@ def test_every_subcommand_refuses_bad_files_by_name(tmp_path, capsys, command, n
 
 def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
     (tmp_path / "taken").write_text("x")
-    assert _cli.main(["simulate", example("simulate_figure3.toml"), "--out", str(tmp_path / "taken")]) == 2
+    assert cli.main(["simulate", example("simulate_figure3.toml"), "--out", str(tmp_path / "taken")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and "taken" in err and "not a folder" in err and "Traceback" not in err
 
@@ -174,7 +174,7 @@ def test_values_in_the_wrong_unit_get_a_hint(tmp_path, capsys, name, old, new, e
     path.write_text(text + "\n")
     command = {"simulate_figure3.toml": "simulate", "pointing_example.csv": "analyze-pointing",
                "donders_example.csv": "fit-donders"}[name]
-    assert _cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    assert cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert path.name in err and "Traceback" not in err
     import re
@@ -187,7 +187,7 @@ def test_every_file_reading_subcommand_names_its_example_and_columns(capsys):
 
     for command, name, _ in READERS:
         with pytest.raises(SystemExit):
-            _cli.main([command, "--help"])
+            cli.main([command, "--help"])
         out = capsys.readouterr().out
         shown = re.search(r"Example: (\S+)", out.replace("\n", " "))
         assert shown and Path(shown.group(1)).name == name and Path(shown.group(1)).is_file(), (command, out)
@@ -195,7 +195,7 @@ def test_every_file_reading_subcommand_names_its_example_and_columns(capsys):
     for command, columns in (("fit-donders", "subject,sample,qw,qx,qy,qz,x1,x2"),
                              ("analyze-pointing", "subject,trial,time,qw,qx,qy,qz,target")):
         with pytest.raises(SystemExit):
-            _cli.main([command, "--help"])
+            cli.main([command, "--help"])
         assert columns in capsys.readouterr().out.replace("\n", "")
 
 
@@ -208,9 +208,9 @@ def test_analyze_pointing_can_skip_invalid_trials_and_says_so_with_the_option_na
     lines[i] = ",".join(f[:3] + ["nan"] + f[4:])  # one NaN sample in trial 1
     path = tmp_path / "one_bad_trial.csv"
     path.write_text("\n".join(lines) + "\n")
-    assert _cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "a"), "--no-figures"]) == 2
+    assert cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "a"), "--no-figures"]) == 2
     err = capsys.readouterr().err
     assert "--skip-invalid" in err and "on_invalid" not in err
-    assert _cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "b"), "--no-figures",
+    assert cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "b"), "--no-figures",
                       "--skip-invalid"]) == 0
     assert "trial 1" in (tmp_path / "b" / "excluded.txt").read_text()

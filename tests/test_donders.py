@@ -618,10 +618,10 @@ def test_main_job_part_recovers_the_table_subjects(tmp_path):
     """`pmpjax reproduce --quick --only donders_nio` (the sizes of the ``nio`` fixture's fit)."""
     import csv
 
-    from pmpjax import _cli
+    from pmpjax._app import cli
 
     out = tmp_path
-    res = _cli.reproduce(out, quick=True, only=["donders_nio"], progress=False, cache=False)
+    res = cli.reproduce(out, quick=True, only=["donders_nio"], progress=False, cache=False)
     assert res["donders_nio"]["status"] == "ok", res["donders_nio"].get("error")
     assert (out / "donders_subject1.png").read_bytes()[:4] == b"\x89PNG"
     r = res["donders_nio"]["results"]

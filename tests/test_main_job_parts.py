@@ -6,13 +6,13 @@ each runs, writes its artefacts, and its numbers agree with something independen
 import numpy as np
 import pytest
 
-from pmpjax import _cli
+from pmpjax._app import cli
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("main_job")
-    res = _cli.reproduce(out, quick=True, only=["ik_figures", "ik_synthetic", "ik_hugmp", "sweeps"],
+    res = cli.reproduce(out, quick=True, only=["ik_figures", "ik_synthetic", "ik_hugmp", "sweeps"],
                          progress=False, cache=False)
     return out, res
 

@@ -6,7 +6,7 @@ import csv
 import numpy as np
 from _notebooks import run_notebook
 
-from pmpjax import _cli
+from pmpjax._app import cli
 
 SUBJECTS = ("subj1", "subj4")
 
@@ -19,7 +19,7 @@ def test_main_job_part_and_command(tmp_path):
     """`pmpjax reproduce --quick --only pointing`: Figures 5–8 and tables exist and agree with the
     ground truth; `pmpjax analyze-pointing` on the files the part wrote gives the same statistics;
     a malformed file is one line naming the file, line and column (exit status 2)."""
-    res = _cli.reproduce(tmp_path, quick=True, only=["pointing"], seed=3, progress=False, cache=False)["pointing"]
+    res = cli.reproduce(tmp_path, quick=True, only=["pointing"], seed=3, progress=False, cache=False)["pointing"]
     assert res["status"] == "ok", res.get("error")
     names = {a["path"] for a in res["artefacts"]}
     for fig in (5, 6, 7, 8):
@@ -42,7 +42,7 @@ def test_main_job_part_and_command(tmp_path):
     pointing = next(p for n, p in files.items() if "donders" not in n)
     donders = next(p for n, p in files.items() if "donders" in n)
     cmd_out = tmp_path / "cmd"
-    code = _cli.main(["analyze-pointing", str(pointing), "--donders", str(donders), "--out", str(cmd_out),
+    code = cli.main(["analyze-pointing", str(pointing), "--donders", str(donders), "--out", str(cmd_out),
                       "--no-figures"])
     assert code == 0
     cmd_rows = list(csv.DictReader((cmd_out / "pointing_statistics.csv").open()))
@@ -54,4 +54,4 @@ def test_main_job_part_and_command(tmp_path):
     k = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#") and "subject" not in ln)
     lines[k] = lines[k].replace(",", ",x", 2)
     bad.write_text("\n".join(lines) + "\n")
-    assert _cli.main(["analyze-pointing", str(bad), "--out", str(cmd_out)]) == 2
+    assert cli.main(["analyze-pointing", str(bad), "--out", str(cmd_out)]) == 2

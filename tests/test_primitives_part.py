@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pmpjax as pj
-from pmpjax import _cli
+from pmpjax._app import cli
 from pmpjax._springy_arm.primitives import PRIMITIVES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -17,7 +17,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("primitives")
-    res = _cli.reproduce(out, quick=True, only=["primitives"], progress=False, cache=False)
+    res = cli.reproduce(out, quick=True, only=["primitives"], progress=False, cache=False)
     return out, res["primitives"]
 
 

@@ -25,7 +25,7 @@ from scipy.optimize import minimize
 import fitting
 import pmpjax as pj
 from fitting import _reaching as R
-from fitting._jobs import REACHING_QUICK
+from fitting._app.parts import REACHING_QUICK
 
 BUNDLED = R.hugmp_directory()
 # the synthetic truth's cond(KJ) = 1e3 lies beyond the default bound (100): raised here
@@ -486,9 +486,9 @@ def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fi
     table's numbers are the held-out errors of fitting.predict_reaching on the same fit."""
     import csv
 
-    from pmpjax import _cli
+    from pmpjax._app import cli
 
-    res = _cli.reproduce(tmp_path, quick=True, only=["reaching"], progress=False, cache=False)["reaching"]
+    res = cli.reproduce(tmp_path, quick=True, only=["reaching"], progress=False, cache=False)["reaching"]
     assert res["status"] == "ok", res.get("error")
     assert (tmp_path / "reaching_hugmp_S02.png").read_bytes()[:4] == b"\x89PNG"
     rows = {r["predictor"]: r for r in csv.DictReader((tmp_path / "reaching_hugmp.csv").open())}

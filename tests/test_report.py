@@ -8,7 +8,7 @@ import re
 import pytest
 
 import pmpjax as pj
-from pmpjax._report import convergence, part_status, write_report
+from pmpjax._app.report import convergence, part_status, write_report
 
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(16)
 

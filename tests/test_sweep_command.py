@@ -10,8 +10,8 @@ import pytest
 import scipy.integrate
 from _reference import arimoto, pmp_qdot, polygon_areas, wrist_fk, wrist_jac
 
-from fitting._sweep_command import sweep_parameters
-from pmpjax import _cli
+from fitting._app.sweep_command import sweep_parameters
+from pmpjax._app import cli
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 EXAMPLE = str(resources.files("pmpjax") / "data" / "examples" / "sweep_figure3.toml")
@@ -26,7 +26,7 @@ def read_rows(path):
 def run(tmp_path_factory):
     """The shipped example, run once through the command line (one compilation for the module)."""
     out = tmp_path_factory.mktemp("sweep") / "out"
-    assert _cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
+    assert cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
     return out
 
 
@@ -79,12 +79,12 @@ def test_a_rerun_resumes_and_a_changed_config_is_refused(run, tmp_path, capsys):
     assert len(shards) == 2
     stamps = [p.stat().st_mtime_ns for p in shards]
     before = (out / "sweep.csv").read_text()
-    assert _cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
+    assert cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
     s = json.loads((out / "sweep.json").read_text())
     assert (s["chunks_computed"], s["chunks_reused"]) == (0, 2)
     assert [p.stat().st_mtime_ns for p in shards] == stamps  # verified chunks are read, never rewritten
     shards[1].unlink()  # an interrupted run: the second chunk is missing
-    assert _cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
+    assert cli.main(["sweep", EXAMPLE, "--out", str(out), "--no-progress"]) == 0
     s = json.loads((out / "sweep.json").read_text())
     assert (s["chunks_computed"], s["chunks_reused"]) == (1, 1)
     assert (out / "sweep.csv").read_text() == before
@@ -92,7 +92,7 @@ def test_a_rerun_resumes_and_a_changed_config_is_refused(run, tmp_path, capsys):
     changed = tmp_path / "changed.toml"
     changed.write_text(open(EXAMPLE).read().replace("k = 22.5", "k = 20.0"))
     capsys.readouterr()
-    assert _cli.main(["sweep", str(changed), "--out", str(out), "--no-progress"]) == 2
+    assert cli.main(["sweep", str(changed), "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "another sweep" in err and "Traceback" not in err
     assert len(list((out / "store" / "chunks").iterdir())) == 2
@@ -121,7 +121,7 @@ BASE = '[model]\nKJ_diag = [0.5, 1.5, 2.0]\n[planner]\nk = 22.5\ntau = 0.08\n'
 def test_malformed_configs_give_one_line_errors_naming_file_and_key(tmp_path, capsys, text, expect):
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    assert _cli.main(["sweep", str(path), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    assert cli.main(["sweep", str(path), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and expect in err and "Traceback" not in err
     assert err.count("\n") == 1 and not (tmp_path / "o").exists()  # nothing written before the checks
@@ -130,7 +130,7 @@ def test_malformed_configs_give_one_line_errors_naming_file_and_key(tmp_path, ca
 def test_json_syntax_errors_name_line_and_column(tmp_path, capsys):
     path = tmp_path / "bad.json"
     path.write_text('{"sweep": {"grid": {"planner.tau": [0.1,]}}}')
-    assert _cli.main(["sweep", str(path), "--no-progress"]) == 2
+    assert cli.main(["sweep", str(path), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "bad.json: line 1, column" in err and "Traceback" not in err
 
@@ -151,7 +151,7 @@ def test_grid_crossed_with_sobol_points_and_dotted_keys():
 
 def test_sweep_has_help(capsys):
     with pytest.raises(SystemExit) as e:
-        _cli.main(["sweep", "--help"])
+        cli.main(["sweep", "--help"])
     assert e.value.code == 0
     out = capsys.readouterr().out
     assert "sweep" in out and "model.KJ[i,j]" in out and "resum" in out

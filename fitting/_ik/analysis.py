@@ -12,9 +12,16 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import as_array, check_positive, check_positive_int, fast_compile_jit, pytree_dataclass, to_jax
+from pmpjax.internal import (
+    as_array,
+    check_positive,
+    check_positive_int,
+    check_prng_key,
+    fast_compile_jit,
+    pytree_dataclass,
+    to_jax,
+)
 
-from .examples import _check_key
 from .weights import estimate_ik_weights
 
 
@@ -124,7 +131,7 @@ def _item_generators(key, batch):
         if data.dtype != np.uint32:
             raise TypeError(f"`key` must be JAX PRNG key(s), got dtype {data.dtype}")
         return [np.random.default_rng(np.random.SeedSequence([int(v) for v in k])) for k in data.reshape(-1, 2)]
-    _check_key(key)
+    check_prng_key("key", key)
     entropy = [int(v) for v in data.reshape(-1)]
     if not batch:
         return [np.random.default_rng(np.random.SeedSequence(entropy))]

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import check_positive_int, fast_compile_jit
+from pmpjax.internal import check_positive_int, check_prng_key, fast_compile_jit
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 
@@ -46,18 +46,8 @@ def ik_fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int 
         raise ValueError(f"`m` must be smaller than n = {w.size} (a redundant chain), got {m}")
     if not (np.isfinite(float(sigma)) and float(sigma) >= 0):
         raise ValueError(f"`sigma` must be a finite number >= 0, got {sigma}")
-    _check_key(key)
+    check_prng_key("key", key)
     return _fig1_data(key, jnp.asarray(w), jnp.asarray(float(sigma)), n_reps=n_reps, K=K, m=m)
-
-
-def _check_key(key, name="key"):
-    """A JAX PRNG key: a typed key (``jax.random.key``) or a raw uint32 (2,) (``PRNGKey``)."""
-    dtype = getattr(key, "dtype", None)
-    if dtype is not None and jnp.issubdtype(dtype, jax.dtypes.prng_key) and np.shape(key) == ():
-        return
-    if dtype == np.uint32 and np.shape(key) == (2,):
-        return
-    raise TypeError(f"`{name}` must be one JAX PRNG key (jax.random.PRNGKey(seed)), got {key!r}")
 
 
 @partial(fast_compile_jit, static_argnames=("n_reps", "K", "m"))

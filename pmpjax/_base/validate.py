@@ -109,6 +109,17 @@ def check_positive_int(name: str, v: Any, minimum: int = 1) -> int:
     return int(v)
 
 
+def check_prng_key(name: str, key: Any) -> None:
+    """``key`` must be one JAX PRNG key: a typed key (``jax.random.key``) or a raw uint32 (2,)
+    (``jax.random.PRNGKey``)."""
+    dtype = getattr(key, "dtype", None)
+    if dtype is not None and jax.numpy.issubdtype(dtype, jax.dtypes.prng_key) and np.shape(key) == ():
+        return
+    if dtype == np.uint32 and np.shape(key) == (2,):
+        return
+    raise TypeError(f"`{name}` must be one JAX PRNG key (jax.random.PRNGKey(seed)), got {key!r}")
+
+
 def _fmt(tail: tuple[int | None, ...]) -> str:
     return "(..., " + ", ".join("?" if t is None else str(t) for t in tail) + ")"
 

@@ -1,4 +1,6 @@
-"""Main-job parts contributed to ``python -m pmpjax`` (entry-point group ``pmpjax.jobs``)."""
+"""fitting's main-job parts (entry-point group ``pmpjax.jobs``), each with its expected run time
+(idle cold runs on two workers, 2-core AMD EPYC Zen 4 KVM; ``benchmarks/`` and the README) and the
+part whose compilations it reuses."""
 
 from __future__ import annotations
 
@@ -6,14 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
+from pmpjax.internal import Part
 
-def ik_hugmp(ctx) -> dict:
+
+def _ik_hugmp(ctx) -> dict:
     """IK weights of the bundled HuG-MP recordings per subject × task, with bootstrap intervals
     (Khoramshahi et al. 2022 Algorithm 1, γ = 0.6, the elbow over-specified and fixed at 1)."""
     import pmpjax as pj
 
-    from ._ik.datasets import hugmp_ik_weights
-    from ._ik.plots import plot_ik_weights
+    from .._ik.datasets import hugmp_ik_weights
+    from .._ik.plots import plot_ik_weights
 
     subjects = (1, 2) if ctx.quick else (1, 2, 3, 4)
     res = hugmp_ik_weights(subjects, n_boot=10 if ctx.quick else 100, key=None)
@@ -41,12 +45,12 @@ def ik_hugmp(ctx) -> dict:
     }
 
 
-def donders_nio(ctx) -> dict:
+def _donders_nio(ctx) -> dict:
     """NIO fits (KJ, q_rest) of the six Table 1–2 subjects from synthetic steady postures
     (0.5° orientation noise, seeded), with held-out torsion errors and a Donders plot."""
     import pmpjax as pj
 
-    from ._donders import donders_coefficients, fit_donders, params_from_stiffness, predicted_torsion
+    from .._donders import donders_coefficients, fit_donders, params_from_stiffness, predicted_torsion
 
     names, KJ, q_rest = pj.paper_subjects()
     n = 500  # (--quick too: one compiled fit serves the tests' NIO fixture and this part)
@@ -94,20 +98,26 @@ def donders_nio(ctx) -> dict:
     }
 
 
-def sweeps(ctx) -> dict:
+def _sweeps(ctx) -> dict:
     """Parameter sweeps at small size: the curvature map (``A_net`` per target over
     stiffness anisotropy × rest posture, figure) and a Donders-fit power analysis (how many
     postures per subject recover ``KJ``), both through ``fitting.sweep`` with a resumable store."""
-    import functools
     import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="pmpjax_sweeps_") as store:
+        return _sweeps_in(ctx, Path(store))
+
+
+def _sweeps_in(ctx, store: Path) -> dict:
+    """The sweeps part with its resumable stores under ``store``."""
+    import functools
 
     import pmpjax as pj
 
-    from ._donders import params_from_stiffness
-    from ._sweep import grid, sweep
-    from ._sweep_examples import curvature_row, donders_power_row, plot_curvature_map
+    from .._donders import params_from_stiffness
+    from .._sweep import grid, sweep
+    from .._sweep_examples import curvature_row, donders_power_row, plot_curvature_map
 
-    store = Path(tempfile.mkdtemp(prefix="pmpjax_sweeps_"))
     anisotropy = np.array([0.5, 1.0, 2.0]) if ctx.quick else np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
     rest_ps = np.linspace(-15.0, 15.0, 3 if ctx.quick else 7)
     cmap = sweep(functools.partial(curvature_row, dt=0.01), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
@@ -152,14 +162,14 @@ def sweeps(ctx) -> dict:
     }
 
 
-def ik_figures(ctx) -> dict:
+def _ik_figures(ctx) -> dict:
     """IK weights, Khoramshahi et al. (2022) Figures 1–3: Algorithm 1 on random data (Fig 1), several
     γ (Fig 2), and the two-prismatic-joint example where γ = 0 converges to the wrong weights (Fig 3)."""
     import jax
     import matplotlib.pyplot as plt
 
-    from ._ik.examples import ik_fig1_data, ik_fig3_data
-    from ._ik.weights import estimate_ik_weights
+    from .._ik.examples import ik_fig1_data, ik_fig3_data
+    from .._ik.weights import estimate_ik_weights
 
     reps = 20 if ctx.quick else 100
     q, x, J = ik_fig1_data(jax.random.PRNGKey(ctx.seed), n_reps=reps + 3 * 10)
@@ -210,15 +220,15 @@ def ik_figures(ctx) -> dict:
             "converged": [int(np.sum(res.converged) + np.sum(r3.converged)), int(np.size(res.converged) + len(g3))]}
 
 
-def ik_synthetic(ctx) -> dict:
+def _ik_synthetic(ctx) -> dict:
     """IK weights of a synthetic Experiment-1 data set (two conditions, "Natural" and "Viscous",
     4-DoF shoulder–elbow arm) with contribution coefficients and the paired Hotelling T² test."""
     import pmpjax as pj
 
-    from ._ik.analysis import contribution_coefficients, hotelling_t2, overspecified_joints
-    from ._ik.datasets import synthetic_ik_dataset
-    from ._ik.plots import plot_ik_weights
-    from ._ik.weights import estimate_ik_weights_lm
+    from .._ik.analysis import contribution_coefficients, hotelling_t2, overspecified_joints
+    from .._ik.datasets import synthetic_ik_dataset
+    from .._ik.plots import plot_ik_weights
+    from .._ik.weights import estimate_ik_weights_lm
 
     n_part = 6 if ctx.quick else 17
     data = synthetic_ik_dataset(ctx.seed, n_participants=n_part, n_trials=5 if ctx.quick else 20)
@@ -267,7 +277,7 @@ def _js(a, digits=5):
     return [[round(float(v), digits) if np.isfinite(v) else None for v in row] for row in np.atleast_2d(a)]
 
 
-def pointing(ctx) -> dict:
+def _pointing(ctx) -> dict:
     """The wrist-pointing experiment end to end on synthetic data (Tommasino & Campolo 2017,
     Sections 2–3): a center-out experiment of the Table subjects written as pointing recordings
     (CSV) with a Donders session each, read back, analysed (segmentation, curvature, t-tests);
@@ -276,10 +286,15 @@ def pointing(ctx) -> dict:
     counts); ``τ0``, ``τ`` fitted by gradient descent through the simulator; Figures 5–8."""
     import pmpjax as pj
 
-    from ._donders import fit_donders
-    from ._pointing import analyze_pointing, predict_pointing
-    from ._pointing_plots import plot_pointing_curvature, plot_pointing_joints, plot_pointing_paths, plot_pointing_speed
-    from ._time_constants import fit_time_constants
+    from .._donders import fit_donders
+    from .._pointing import analyze_pointing, predict_pointing
+    from .._pointing_plots import (
+        plot_pointing_curvature,
+        plot_pointing_joints,
+        plot_pointing_paths,
+        plot_pointing_speed,
+    )
+    from .._time_constants import fit_time_constants
 
     # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
     # fitted time constants can be told apart.
@@ -359,14 +374,14 @@ def pointing(ctx) -> dict:
 REACHING_QUICK = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 4), time_constants="fitted")
 
 
-def reaching(ctx) -> dict:
+def _reaching(ctx) -> dict:
     """Held-out prediction of the bundled HuG-MP arm movements (repetitions 8–10) by the λ0-PMP
     fitted per subject to the joint trajectories of repetitions 1–7 (stiffness, rest posture; the
     final postures through the equilibria first), against every baseline; a table and one figure
     per subject."""
     import json
 
-    from ._reaching import fit_reaching, plot_reaching_subject, predict_reaching
+    from .._reaching import fit_reaching, plot_reaching_subject, predict_reaching
 
     # Full: fit_reaching's defaults on all four subjects, every task (trajectories included: RODAS4,
     # about 2.5 min on two cores); --quick: one subject, task 1, repetitions 1-2, a few iterations.
@@ -394,7 +409,7 @@ def reaching(ctx) -> dict:
                    f"reaching_hugmp_{s}.png",
                    f"{s}: recorded (solid) and predicted joint trajectories and hand paths of held-out motions.",
                    dpi=90)
-    variants = json.loads((Path(__file__).parent / "data" / "reaching_variants.json").read_text())
+    variants = json.loads((Path(__file__).parents[1] / "data" / "reaching_variants.json").read_text())
     ctx.table(variants["rows"], "reaching_variants.csv",
               f"Every λ0-PMP variant (planner × damping × time constants) fitted to the trajectories of all four "
               f"subjects, the Donders-only model and the baselines: pooled held-out RMSE and final-posture error "
@@ -417,3 +432,12 @@ def reaching(ctx) -> dict:
         "problems": pred.problems,
         "converged": [int(np.sum(fit.converged)), int(np.size(fit.converged))],
     }
+
+
+pointing = Part(_pointing, seconds=33, seconds_full=42, order=20)
+donders_nio = Part(_donders_nio, seconds=3, seconds_full=2, follows="pointing", order=10)  # (pointing's NIO shapes)
+ik_figures = Part(_ik_figures, seconds=8, seconds_full=9, order=30)
+ik_synthetic = Part(_ik_synthetic, seconds=8, seconds_full=9, order=40)
+ik_hugmp = Part(_ik_hugmp, seconds=8, seconds_full=66, order=50)
+reaching = Part(_reaching, seconds=40, seconds_full=183, order=60)
+sweeps = Part(_sweeps, seconds=16, seconds_full=27, order=70)

@@ -73,7 +73,7 @@ def _paper(text: str) -> str:
 def _cell(value: str, column: str) -> str:
     """A CSV cell as shown: status codes by name, numbers to about four significant digits."""
     if column.strip().lower() == "status" and _INT.fullmatch(value):
-        from ._base.status import Status
+        from .._base.status import Status
 
         try:
             return Status(int(value)).name

@@ -2,7 +2,7 @@
 
 Each ``add_<name>(subparsers)`` adds a parser whose ``func(args) -> int`` runs the command.
 Readers name the file, line and column of bad input; the command line prints one line and exits
-with status 2 (see ``pmpjax._cli``).
+with status 2 (see ``pmpjax._app.cli``).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def _fit_donders(args) -> int:
     _x64()
     import pmpjax as pj
 
-    from ._donders import fit_donders
+    from .._donders import fit_donders
 
     rec = pj.read_recordings(args.file)
     out = Path(args.out)
@@ -173,8 +173,8 @@ def _ik_weights(args) -> int:
     _x64()
     import pmpjax as pj
 
-    from ._ik.analysis import contribution_coefficients
-    from ._ik.weights import estimate_ik_weights, estimate_ik_weights_lm
+    from .._ik.analysis import contribution_coefficients
+    from .._ik.weights import estimate_ik_weights, estimate_ik_weights_lm
 
     if not 0.0 <= args.gamma <= 1.0:
         raise ValueError(f"--gamma must lie in [0, 1], got {args.gamma}")
@@ -236,10 +236,15 @@ def _analyze_pointing(args) -> int:
 
     import pmpjax as pj
 
-    from ._donders import fit_donders
-    from ._pointing import analyze_pointing, predict_pointing
-    from ._pointing_plots import plot_pointing_curvature, plot_pointing_joints, plot_pointing_paths, plot_pointing_speed
-    from ._time_constants import fit_time_constants
+    from .._donders import fit_donders
+    from .._pointing import analyze_pointing, predict_pointing
+    from .._pointing_plots import (
+        plot_pointing_curvature,
+        plot_pointing_joints,
+        plot_pointing_paths,
+        plot_pointing_speed,
+    )
+    from .._time_constants import fit_time_constants
 
     try:
         rec = pj.read_pointing(args.file, on_invalid="skip" if args.skip_invalid else "raise")
@@ -290,6 +295,6 @@ def add_commands(sub) -> None:
     add_fit_donders(sub)
     add_ik_weights(sub)
     add_analyze_pointing(sub)
-    from ._sweep_command import add_sweep
+    from .sweep_command import add_sweep
 
     add_sweep(sub)

@@ -35,12 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ._base.validate import check_spd, input_file, output_dir, read_text_file
+from .._base.validate import check_spd, input_file, output_dir, read_text_file
 
 
 def example_help(name: str) -> str:
     """The ``--help`` line pointing to a shipped example file (``pmpjax/data/examples/name``)."""
-    path = Path(__file__).parent / "data" / "examples" / name
+    path = Path(__file__).parents[1] / "data" / "examples" / name
     return f"Example: {path} (copy it to start from your own: cp {path} .)"
 
 

@@ -100,7 +100,7 @@ def sweep_parameters(cfg: dict, path, n: int, ptype: str) -> tuple[dict[str, np.
     sw = cfg.get("sweep")
     if not isinstance(sw, dict):
         raise ConfigError(f"{path}: missing table [sweep] (with [sweep.grid] and/or [sweep.sample])")
-    from ._sweep import grid, latin_hypercube, sobol
+    from .._sweep import grid, latin_hypercube, sobol
 
     parsed: dict = {}
     tables = []
@@ -289,7 +289,7 @@ def build_sweep(path):
 def run_sweep_config(path, out=None, *, progress: bool = False) -> dict:
     """Run ``pmpjax sweep CONFIG`` into ``out`` (default ``sweep.out`` of the file, else
     ``out_sweep``); returns the ``sweep.json`` content."""
-    from ._sweep import sweep
+    from .._sweep import sweep
 
     row_fn, params, axes, opt = build_sweep(path)
     out = Path(out or opt["out"] or "out_sweep")

@@ -17,6 +17,8 @@ import itertools
 
 import numpy as np
 
+from .parts import Part
+
 # Reflex scenarios [s]: reach forward (up) and back to rest, out again, touched on the way out; a
 # later target to 'side' must be suppressed by the reflex.
 REACH = ((0.0, 2), (1.0, 0), (2.0, 2), (3.0, 3))  # (time, primitive index)
@@ -45,7 +47,7 @@ def _c_hand(arm, q) -> np.ndarray:
     return out
 
 
-def primitives_part(ctx) -> dict:
+def _primitives(ctx) -> dict:
     """Williamson (1996) beyond Figure 4: primitives under gravity, blends vs winner-take-all, reflexes.
 
     Gravity equilibria of the primitives and their blends vs winner-take-all (Figs 3, 5), the convergent
@@ -55,10 +57,10 @@ def primitives_part(ctx) -> dict:
     import matplotlib.pyplot as plt
 
     from .._chains.mjcf import MjcfChain
-    from .arm import load_arm, rollout
-    from .plots import plot_force_field, plot_reflex
-    from .primitives import PRIMITIVE_NAMES, arm_equilibrium, blend, default_primitives, winner_take_all
-    from .reflexes import reflex_network, run_reflexes, script_inputs, stack_inputs
+    from .._springy_arm.arm import load_arm, rollout
+    from .._springy_arm.plots import plot_force_field, plot_reflex
+    from .._springy_arm.primitives import PRIMITIVE_NAMES, arm_equilibrium, blend, default_primitives, winner_take_all
+    from .._springy_arm.reflexes import reflex_network, run_reflexes, script_inputs, stack_inputs
 
     arm = load_arm(contacts=False)  # touch is scripted; no probe contacts needed
     P = np.asarray(default_primitives())
@@ -207,3 +209,6 @@ def primitives_part(ctx) -> dict:
         "grasp_time_s": float(t[k]), "grasp_hold_error_rad": hold, "grasp_set_point_gap_rad": gap,
         "withdrawal_set_point_vs_rest_rad": withdrawn, "lead_set_point_shift_rad": lead_shift,
     }
+
+
+primitives = Part(_primitives, seconds=8, seconds_full=7, order=90)
