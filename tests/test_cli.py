@@ -377,3 +377,24 @@ def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, 
     assert "bad.toml" in err and key in err and "Traceback" not in err
     with pytest.raises(ValueError, match=key):
         pj.read_simulation_config(path)
+
+
+def test_every_registered_part_carries_its_metadata_and_the_host_names_none():
+    """Parts are found by entry point and schedule by their own metadata: every registered part
+    is a Part with positive expected seconds and a ``follows`` naming another registered part;
+    the host modules hold no part's name (adding a part never edits them)."""
+    import ast
+
+    from pmpjax._app.parts import as_part, available_parts
+
+    parts = {name: as_part(p) for name, p in available_parts().items()}
+    assert {"figure3", "figure4", "primitives", "pointing", "reaching", "donders_nio"} <= set(parts)
+    for name, part in parts.items():
+        assert isinstance(part, Part) and part.seconds > 0 and part.seconds_full > 0 and part.doc, name
+        assert part.follows is None or (part.follows in parts and part.follows != name), name
+    assert [p.order for p in parts.values()] == sorted(p.order for p in parts.values())
+    host = Path(cli.__file__).parent
+    for module in ("cli.py", "reproduce.py", "workers.py", "display.py", "parts.py", "report.py"):
+        strings = {n.value for n in ast.walk(ast.parse((host / module).read_text()))
+                   if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+        assert not strings & set(parts), (module, strings & set(parts))
