@@ -32,13 +32,6 @@ Section 2 "Data Analysis", Section 3; design §3.5).
 Trials with invalid data (NaN, non-monotonic time, non-unit quaternions, unknown targets) are
 skipped with a warning naming file, subject and trial; every skipped trial or movement is listed
 in ``PointingAnalysis.excluded`` with its reason, and the analysis goes on.
-
-**Prediction** (:func:`predict_pointing`, Section 3): every movement of every subject simulated
-from the subject's mean rest posture before that movement to the target with the λ0-PMP
-(``W = τ0 KJ``, Eq 7; Arimoto ``K(t)``, Eq 8, with ``k = b_max/τ0``, Eq 10), by default
-``τ = τ0 = T_sj/5``, all in one batched ``pmpjax.simulate`` call; the model paths are observed through the
-analysis' smoothing spline (its equivalent kernel), cut at the same speed threshold, and their
-``A_net`` is compared with the measured one by a one-sample t-test.
 """
 
 from __future__ import annotations
@@ -46,40 +39,28 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from pmpjax import (
     DIRECTIONS,
     MOVEMENT_LABELS,
     PointingRecording,
-    Status,
-    Wrist,
     center_out_targets,
     curvature_measures,
     gcv_lambda,
     joint_angles_from_quat,
     segment_by_speed,
     smooth_path,
-    task_damping,
 )
 from pmpjax.internal import (
-    as_array,
     bucket,
     check_positive_int,
-    check_spd,
     drop_trials,
     fast_compile_jit,
-    model_grid,
-    normalised_movements,
     trial_problems,
 )
 
 _ALPHA = 0.05
-
-
-# --- analysis ----------------------------------------------------------------------------------
 
 
 @dataclasses.dataclass(frozen=True)
@@ -438,330 +419,4 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
         mean_speed=mean_speed, sd_speed=sd_speed, T=T, n_valid=n_valid, targets=targets, a_hyst=a_hyst,
         p_sum=p_sum, p_net=p_net, p_hyst=p_hyst, lam=lam, radius=rec.radius, d=rec.d,
         rate=float(1.0 / np.median(dts)), threshold=float(threshold), source=src,
-    )
-
-
-# --- model movements analysed like the data (JAX; shared with the time-constant fit) -------------
-
-
-def _hermite_uniform(h, y, dy, sq):
-    """Cubic Hermite interpolation of ``y`` (B, n, k) with derivatives ``dy`` on the grid ``i·h``."""
-    n = y.shape[1]
-    i = jnp.clip(jnp.floor(sq / h).astype(int), 0, n - 2)
-    u = (sq / h - i)[..., None]
-    take = lambda a, idx: jnp.take_along_axis(a, idx[..., None], axis=1)  # noqa: E731
-    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
-    return h00 * take(y, i) + h10 * h * take(dy, i) + h01 * take(y, i + 1) + h11 * h * take(dy, i + 1)
-
-
-def _slopes(h, y):
-    """Derivatives of ``y`` (B, n) on the grid ``i·h`` by central differences (one-sided at the
-    ends): the slopes of the Catmull–Rom (C¹ cubic Hermite) interpolant."""
-    return jnp.concatenate([y[:, 1:2] - y[:, :1], (y[:, 2:] - y[:, :-2]) / 2, y[:, -1:] - y[:, -2:-1]], 1) / h
-
-
-def _hermite_pieces(h, y, m, j):
-    """Values and slopes (×h) at both ends of interval ``j`` (B,) of the interpolant of ``y``."""
-    take = lambda a, k: jnp.take_along_axis(a, k[:, None], axis=1)[:, 0]  # noqa: E731
-    return take(y, j), h * take(m, j), take(y, j + 1), h * take(m, j + 1)
-
-
-def _hermite_at(y0, d0, y1, d1, u):
-    """The cubic Hermite piece at ``u`` ∈ [0, 1] and its derivative d/du."""
-    p = (2 * u**3 - 3 * u**2 + 1) * y0 + (u**3 - 2 * u**2 + u) * d0 + (-2 * u**3 + 3 * u**2) * y1 + (u**3 - u**2) * d1
-    dp = (6 * u**2 - 6 * u) * (y0 - y1) + (3 * u**2 - 4 * u + 1) * d0 + (3 * u**2 - 2 * u) * d1
-    return p, dp
-
-
-def _crossings(h, v, threshold):
-    """Onset and offset (B,) [grid units × h] where the speed ``v`` (B, n) crosses ``threshold`` of
-    its peak, before and after the peak, on its C¹ (Catmull–Rom) interpolant; the peak is the
-    interpolant's maximum next to the largest sample. Both are continuously differentiable in ``v``
-    (linear interpolation and a discrete maximum made the fits' residual piecewise smooth, and
-    Levenberg–Marquardt crawled along its kinks)."""
-    n = v.shape[1]
-    idx = jnp.arange(n)
-    m = _slopes(h, v)
-    i = jnp.clip(jnp.argmax(v, axis=1), 1, n - 2)
-    peak = jnp.take_along_axis(v, i[:, None], axis=1)[:, 0]
-    for j in (i - 1, i):  # p'(u) = a u² + b u + c on the intervals either side of the largest sample
-        y0, d0, y1, d1 = _hermite_pieces(h, v, m, j)
-        a, b, c = 6 * y0 + 3 * d0 - 6 * y1 + 3 * d1, -6 * y0 - 4 * d0 + 6 * y1 - 2 * d1, d0
-        disc = jnp.maximum(b * b - 4 * a * c, 0.0)
-        safe_a = jnp.where(jnp.abs(a) > 1e-300, a, 1.0)
-        for sgn in (1.0, -1.0):
-            quad = jnp.abs(a) > 1e-12 * (jnp.abs(b) + jnp.abs(c))
-            u = jnp.where(quad, (-b + sgn * jnp.sqrt(disc)) / (2 * safe_a), -c / jnp.where(b != 0, b, 1.0))
-            val = _hermite_at(y0, d0, y1, d1, jnp.clip(u, 0.0, 1.0))[0]
-            peak = jnp.maximum(peak, jnp.where((u >= 0) & (u <= 1), val, peak))
-    level = threshold * peak
-    below = v < level[:, None]
-    i_on = jnp.max(jnp.where(below & (idx[None] < i[:, None]), idx[None], 0), axis=1)
-    i_off = jnp.min(jnp.where(below & (idx[None] > i[:, None]), idx[None], n - 1), axis=1) - 1
-
-    def root(j):
-        """The crossing of ``level`` inside interval ``j``: Newton from the linear estimate."""
-        y0, d0, y1, d1 = _hermite_pieces(h, v, m, j)
-        u = jnp.clip((level - y0) / jnp.where(y1 != y0, y1 - y0, 1.0), 0.0, 1.0)
-        for _ in range(4):
-            f, df = _hermite_at(y0, d0, y1, d1, u)
-            u = jnp.clip(u - (f - level) / jnp.where(df != 0, df, 1.0), 0.0, 1.0)
-        return h * (j + u)
-
-    return root(i_on), root(i_off), peak
-
-
-def _silverman_weights(bandwidth, h, J):
-    """Discrete equivalent kernel of a cubic smoothing spline (Silverman 1984):
-    ``K(u) = ½ e^{−|u|/√2} sin(|u|/√2 + π/4)`` at offsets ``j·h``, ``|j| ≤ J``, for bandwidths
-    (B,) in the grid's units; normalised to sum 1. (B, 2J + 1)."""
-    u = jnp.abs(jnp.arange(-J, J + 1, dtype=float) * h)[None, :] / bandwidth[:, None]
-    w = 0.5 * jnp.exp(-u / np.sqrt(2)) * jnp.sin(u / np.sqrt(2) + np.pi / 4)
-    return w / jnp.sum(w, axis=1, keepdims=True)
-
-
-def _smooth(y, w, *, edge):
-    """``y`` (B, n, k) convolved with per-item symmetric weights ``w`` (B, 2J + 1); outside the
-    grid ``y`` continues as its end values (``edge``) or as zeros. By FFT: a handful of
-    operations in the compiled graph whatever ``J`` (shifted sums would add 2J + 1 per call)."""
-    J = (w.shape[1] - 1) // 2
-    if J == 0:
-        return y
-    n = y.shape[1]
-    lo = jnp.repeat(y[:, :1], J, axis=1) if edge else jnp.zeros_like(y[:, :J])
-    hi = jnp.repeat(y[:, -1:], J, axis=1) if edge else jnp.zeros_like(y[:, :J])
-    yp = jnp.concatenate([lo, y, hi], axis=1)
-    L = 1 << (n + 4 * J).bit_length()
-    conv = jnp.fft.irfft(jnp.fft.rfft(yp, n=L, axis=1) * jnp.fft.rfft(w, n=L, axis=1)[:, :, None], n=L, axis=1)
-    return conv[:, 2 * J:2 * J + n]  # symmetric kernel: the convolution is the centred moving sum
-
-
-def spline_bandwidth(lam, rate):
-    """Bandwidth [s] of the equivalent kernel of a cubic smoothing spline with parameter ``lam``
-    (SciPy's ``make_smoothing_spline`` scale) on samples at ``rate`` [Hz]: ``(λ / rate)^{1/4}``
-    (Silverman 1984)."""
-    return (np.asarray(lam) / rate) ** 0.25
-
-
-def _profiles(tr, T, half, bandwidth, *, h, J, threshold, n_samples, radius, joints=True):
-    """A batch of normalised-time model movements (``pmpjax._wrist.pointing.normalised_movements``)
-    analysed like the data: observed through the smoothing spline of the analysis (its equivalent
-    kernel, ``bandwidth`` (B,) in units of T; ``J`` grid steps each side), cut at ``threshold``
-    of its peak speed widened by ``half`` (B,) (half a data sample, in units of T: the data's
-    sample-level cut lies on average half a sample outside the crossing), then the path, joint
-    angles and speed at ``n_samples`` normalised times, the duration [s] and the curvature of the
-    cut path (line through its own ends); ``joints``: also the joint angles (``q_path``).
-
-    ``T`` (B,) [s] the time unit of each movement. Differentiable in every array input.
-    """
-    w = _silverman_weights(bandwidth, h, J)
-    x, xdot = _smooth(tr.x, w, edge=True), _smooth(tr.xdot, w, edge=False)
-    v = jnp.linalg.norm(xdot, axis=-1) / T[:, None]  # m/s
-    s_on, s_off, peak = _crossings(h, v, threshold)
-    span = h * (v.shape[1] - 1)
-    s_on = jnp.clip(s_on - half, 0.0, span)
-    s_off = jnp.clip(s_off + half, 0.0, span)
-    u = jnp.linspace(0.0, 1.0, n_samples)
-    sq = s_on[:, None] + u[None] * (s_off - s_on)[:, None]
-    dense = s_on[:, None] + jnp.linspace(0.0, 1.0, 96)[None] * (s_off - s_on)[:, None]
-    xd = _hermite_uniform(h, x, xdot, dense)
-    a_sum, a_net = curvature_measures(xd, xd[:, 0], xd[:, -1], scale=radius)
-    speed = _hermite_uniform(h, v[..., None], _slopes(h, v)[..., None], sq)[..., 0]
-    out = dict(path=_hermite_uniform(h, x, xdot, sq), speed=speed, onset=s_on * T,
-               offset=s_off * T, duration=(s_off - s_on) * T, peak=peak, a_sum=a_sum, a_net=a_net)
-    if joints:
-        out["q_path"] = _hermite_uniform(h, _smooth(tr.q, w, edge=True), _smooth(tr.qdot, w, edge=False), sq)
-    return out
-
-
-def _kernel_halfwidth(bandwidth, h):
-    """Static half-width (grid steps) of the kernel: 6 bandwidths (the kernel is < 1e-3 there)."""
-    return int(np.ceil(6.0 * float(np.max(bandwidth)) / h))
-
-
-_profiles_jit = fast_compile_jit(_profiles, static_argnames=("h", "J", "threshold", "n_samples", "radius"))
-
-
-def _check_params(analysis, KJ, q_rest):
-    """``KJ`` (S, 3, 3) and ``q_rest`` (S, 3) (one (3, 3) / (3,) serves all subjects), validated."""
-    if not isinstance(analysis, PointingAnalysis):
-        raise TypeError(f"`analysis` must be a PointingAnalysis (fitting.analyze_pointing), got "
-                        f"{type(analysis).__name__}")
-    S = len(analysis.subjects)
-    KJ = np.asarray(as_array("KJ", KJ, tail=(3, 3)), dtype=float)
-    q_rest = np.asarray(as_array("q_rest", q_rest, tail=(3,)), dtype=float)
-    if KJ.ndim == 2:
-        KJ = np.broadcast_to(KJ, (S, 3, 3))
-    if q_rest.ndim == 1:
-        q_rest = np.broadcast_to(q_rest, (S, 3))
-    if KJ.shape != (S, 3, 3):
-        raise ValueError(f"`KJ` must be (3, 3) or (S, 3, 3) with S = {S} subjects of the analysis, got {KJ.shape}")
-    if q_rest.shape != (S, 3):
-        raise ValueError(f"`q_rest` must be (3,) or (S, 3) with S = {S} subjects of the analysis, got "
-                         f"{q_rest.shape}")
-    check_spd("KJ", KJ)
-    return KJ, q_rest
-
-
-def _time_constant(name, v, T):
-    """``v`` (scalar, (S,) or (S, L) [s]) broadcast to ``T``'s (S, L); None: the paper's T/5."""
-    if v is None:
-        return T / 5.0
-    a = np.asarray(as_array(name, v), dtype=float)
-    if a.ndim == 1 and a.shape[0] == T.shape[0]:
-        a = a[:, None]
-    try:
-        a = np.broadcast_to(a, T.shape)
-    except ValueError as e:
-        raise ValueError(f"`{name}` must be a scalar, (S,) or (S, L) = {T.shape} [s], got shape {np.shape(v)}") from e
-    if np.any(a <= 0):
-        raise ValueError(f"`{name}` must be positive [s], got {a.min()}")
-    return a
-
-
-def _movement_inputs(analysis):
-    """Per subject × label: mean rest posture (S, L, 3), end target (S, L, 2), T (S, L) and the
-    cells with data (S, L). Cells without data get placeholder values (masked by the callers)."""
-    S, L = analysis.T.shape
-    has = analysis.n_valid >= 1
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        q0 = np.nanmean(analysis.rest_q, axis=2)
-    fallback = np.nanmean(q0[has], axis=0) if has.any() else np.zeros(3)
-    q0 = np.where(has[..., None], q0, fallback)
-    T = np.where(has, analysis.T, np.nanmean(analysis.T) if has.any() else 0.5)
-    target = np.broadcast_to(analysis.targets[:, 1], (S, L, 2))
-    return q0, target, T, has
-
-
-@dataclasses.dataclass(frozen=True)
-class PointingPrediction:
-    """Donders-fitted λ0-PMP predictions of every movement (:func:`predict_pointing`), numpy arrays.
-
-    ``subjects``, ``labels``; ``tau0``, ``tau``, ``k`` (S, L) the time constants [s] and Eq 10
-    gain used (at the mean rest posture); ``t`` (S, L, N) [s], ``x`` (S, L, N, 2) [m], ``q``
-    (S, L, N, 3) [rad], ``speed`` (S, L, N) [m/s] the simulated movements (mean over the trials,
-    each from its measured rest posture); ``onset``, ``offset``, ``duration`` (S, L) [s] their cut
-    at the analysis threshold; ``path`` (S, L, n, 2), ``q_path`` (S, L, n, 3), ``speed_path``
-    (S, L, n) at the normalised samples; ``a_sum``, ``a_net`` (S, L) (means over the trials);
-    the comparison with the data: ``p_model`` (S, L) p-value of the one-sample t-test of the
-    measured ``A_net`` against the model's, ``captured`` (S, L) (tested and p ≥ ``alpha``),
-    ``n_tested``, ``n_captured`` (S,) and ``share_captured`` (S,) = captured / 16 (the paper's
-    "6 of 16 (37 %)"); ``status`` (S, L) (``pmpjax.Status``: 0 ok, TOO_FEW_DATA without data,
-    NONFINITE / SINGULAR from the simulation); ``alpha``.
-    """
-
-    subjects: tuple
-    labels: tuple
-    tau0: np.ndarray
-    tau: np.ndarray
-    k: np.ndarray
-    t: np.ndarray
-    x: np.ndarray
-    q: np.ndarray
-    speed: np.ndarray
-    onset: np.ndarray
-    offset: np.ndarray
-    duration: np.ndarray
-    path: np.ndarray
-    q_path: np.ndarray
-    speed_path: np.ndarray
-    a_sum: np.ndarray
-    a_net: np.ndarray
-    p_model: np.ndarray
-    captured: np.ndarray
-    n_tested: np.ndarray
-    n_captured: np.ndarray
-    share_captured: np.ndarray
-    status: np.ndarray
-    alpha: float
-
-    def table(self) -> str:
-        """Per subject: the movements whose ``A_net`` the model captures (paper Results)."""
-        out = []
-        for s, name in enumerate(self.subjects):
-            caught = [lab for lab, c in zip(self.labels, self.captured[s]) if c]
-            out.append(f"{name}: model captures A_net of {int(self.n_captured[s])} of {len(self.labels)} movements "
-                       f"({100 * self.share_captured[s]:.0f} %; {int(self.n_tested[s])} tested): {', '.join(caught)}")
-        return "\n".join(out)
-
-
-def compare_curvature(a_net, model_a_net, *, alpha: float = _ALPHA):
-    """One-sample t-tests of measured ``a_net`` (S, L, K) (NaN = excluded) against the model's
-    ``model_a_net`` (S, L): ``(p (S, L), captured (S, L), n_tested (S,), n_captured (S,))``."""
-    S, L = model_a_net.shape
-    p = np.array([[_ttest(a_net[s, j], model_a_net[s, j]) if np.isfinite(model_a_net[s, j]) else np.nan
-                   for j in range(L)] for s in range(S)])
-    tested = np.isfinite(p)
-    captured = tested & (p >= alpha)
-    return p, captured, tested.sum(1), captured.sum(1)
-
-
-def predict_pointing(analysis: PointingAnalysis, KJ, q_rest, *, tau0=None, tau=None) -> PointingPrediction:
-    """The Donders-fitted λ0-PMP's prediction of every movement (paper Section 3).
-
-    **Arguments:** ``analysis`` (:func:`analyze_pointing`); ``KJ`` (S, 3, 3) SPD [Nm/rad] and
-    ``q_rest`` (S, 3) [rad] in the order of ``analysis.subjects`` (one (3, 3) / (3,) serves all),
-    e.g. from ``fitting.fit_donders`` on the subjects' Donders sessions; ``tau0``, ``tau`` [s]:
-    scalar, (S,) or (S, L); default the paper's ``τ = τ0 = T_sj/5`` with ``T_sj`` the measured
-    mean duration.
-
-    Every measured movement is simulated from its measured rest posture before the movement to
-    the target: ``W = τ0 KJ`` (Eq 7), Arimoto ``K(t)`` (Eq 8) with ``k = b_max(B(q0))/τ0``
-    (Eq 10). All subjects × movements × trials run in one batched ``pmpjax.simulate`` call (in
-    time normalised by ``T_sj``, see ``normalised_movements``). The model movements are observed
-    through the analysis' smoothing spline (its equivalent kernel) and cut at its speed
-    threshold like the data; the model's values per subject × movement are the means over the
-    trials. Its ``A_net`` is compared with the measured ones by a one-sample t-test per subject ×
-    movement (α = 0.05). Returns a :class:`PointingPrediction`.
-
-    **Compile time:** ≈ 3 s on first use, together with :func:`analyze_pointing`
-    (benchmarks/compile_times.py).
-    """
-    KJ, q_rest = _check_params(analysis, KJ, q_rest)
-    q_mean, target, T, has = _movement_inputs(analysis)
-    S, L, K = analysis.valid.shape
-    tau0_ = _time_constant("tau0", tau0, T)
-    tau_ = _time_constant("tau", tau, T)
-    r0, r = tau0_ / T, tau_ / T
-    span, dt = model_grid(np.concatenate([r0[has], r[has]]) if has.any() else np.array([0.2]))
-    valid = analysis.valid
-    q0 = np.where(valid[..., None], np.nan_to_num(analysis.rest_q), q_mean[:, :, None])
-    B = S * L * K
-    flat = lambda a, tail=(): np.broadcast_to(  # noqa: E731
-        np.reshape(a, (S, L, 1) + tail) if np.ndim(a) == 2 + len(tail) else a, (S, L, K) + tail).reshape((B,) + tail)
-    tr = normalised_movements(flat(KJ[:, None, None], (3, 3)), flat(q_rest[:, None, None], (3,)), flat(r0), flat(r),
-                              flat(q0, (3,)), flat(target, (2,)), span=span, dt=dt, d=analysis.d)
-    bw = flat(spline_bandwidth(analysis.lam, analysis.rate)[:, None] / T)
-    prof = jax.device_get(_profiles_jit(tr, jnp.asarray(flat(T)), jnp.asarray(0.5 / analysis.rate / flat(T)),
-                                        jnp.asarray(bw), h=float(dt), J=_kernel_halfwidth(bw, dt),
-                                        threshold=analysis.threshold, n_samples=analysis.mean_path.shape[2],
-                                        radius=analysis.radius))
-    rs = lambda a: np.asarray(a).reshape((S, L, K) + np.shape(a)[1:])  # noqa: E731
-    sim_status = rs(tr.status)
-    bad = np.where(valid, sim_status, 0)
-    status = np.where(~has, int(Status.TOO_FEW_DATA), np.max(bad, axis=2))
-    use = valid & (sim_status == 0)
-
-    def mean(a):  # over the valid trials of each subject × movement; NaN where none
-        m = use.reshape(use.shape + (1,) * (a.ndim - 3))
-        n = np.maximum(use.sum(2), 1).reshape((S, L) + (1,) * (a.ndim - 3))
-        out = np.where(m, a, 0.0).sum(2) / n
-        return np.where((use.sum(2) > 0).reshape((S, L) + (1,) * (a.ndim - 3)), out, np.nan)
-
-    a_net = mean(rs(prof["a_net"]))
-    p, captured, n_tested, n_captured = compare_curvature(analysis.a_net, a_net)
-    W = tau0_[..., None, None] * KJ[:, None]
-    J = np.asarray(Wrist(analysis.d).jacobian(q_mean))
-    k = np.linalg.eigvalsh(np.asarray(task_damping(J, W)))[..., -1] / tau0_
-    ok = status == 0
-    t = np.asarray(tr.t)[None, None] * T[..., None]
-    return PointingPrediction(
-        subjects=analysis.subjects, labels=analysis.labels, tau0=tau0_, tau=tau_, k=np.where(ok, k, np.nan), t=t,
-        x=mean(rs(tr.x)), q=mean(rs(tr.q)), speed=mean(np.linalg.norm(rs(tr.xdot), axis=-1) / flat(T).reshape(
-            S, L, K, 1)), onset=mean(rs(prof["onset"])), offset=mean(rs(prof["offset"])),
-        duration=mean(rs(prof["duration"])), path=mean(rs(prof["path"])), q_path=mean(rs(prof["q_path"])),
-        speed_path=mean(rs(prof["speed"])), a_sum=mean(rs(prof["a_sum"])), a_net=a_net, p_model=p,
-        captured=captured, n_tested=n_tested, n_captured=n_captured, share_captured=n_captured / L, status=status,
-        alpha=_ALPHA,
     )

@@ -11,7 +11,8 @@ import numpy as np
 
 from pmpjax import DIRECTIONS
 
-from ._pointing import PointingAnalysis, PointingPrediction
+from .analysis import PointingAnalysis
+from .prediction import PointingPrediction
 
 _JOINTS = ("PS", "FE", "RUD")
 _JOINT_COLORS = ("tab:red", "tab:purple", "tab:green")
