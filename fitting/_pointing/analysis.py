@@ -225,6 +225,180 @@ def _subject_lambda(rec, subject, trials, x_all):
     raise ValueError(f"{rec.source}: subject {subject!r} has no trial with a movement window of >= 12 samples")
 
 
+@dataclasses.dataclass(frozen=True)
+class _Movement:
+    """One movement found in a trial (step 3): label index ``j``, its measures, its normalised
+    samples and its cut screen path ``segment`` (n, 2)."""
+
+    j: int
+    duration: float
+    path_length: float
+    peak_speed: float
+    start_q: np.ndarray
+    rest_q: np.ndarray
+    start_x: np.ndarray
+    end_x: np.ndarray
+    norm_x: np.ndarray
+    norm_q: np.ndarray
+    norm_v: np.ndarray
+    segment: np.ndarray
+
+
+def _movement_targets(radius):
+    """Nominal start and end target (L, 2, 2) of every movement label, and the targets by name."""
+    tg = center_out_targets(radius)
+    targets = np.array([[tg["C"], tg[lab[4:]]] if lab.startswith("out") else [tg[lab[3:]], tg["C"]]
+                        for lab in MOVEMENT_LABELS])
+    return targets, tg
+
+
+def _trial_movements(rec, rows, lam, x_all, q_all, targets, tg, *, threshold, n_samples):
+    """Steps 2–3 for one trial (its ``rows`` of ``rec``): smoothing, then the movements between cues.
+    Returns ``(movements, skips)``: the :class:`_Movement` s in the trial's order and
+    ``(label or None, reason)`` for everything skipped, in the order met."""
+    t = rec.time[rows]
+    sm = smooth_path(t, np.concatenate([x_all[rows], q_all[rows]], axis=1), lam=lam)
+    xs, qs = sm.x[:, :2], sm.x[:, 2:]
+    speed = np.linalg.norm(sm.xdot[:, :2], axis=1)
+    names = rec.target[rows]
+    starts, ends = _epochs(names)
+    movements, skips, seen = [], [], set()
+    epochs = [(a, b, str(names[a - 1])) for a, b in zip(starts[1:], ends[1:])]
+    first = str(names[starts[0]])
+    if first != "C":  # a peripheral target already on screen: the hand starts where it rests
+        rest = float(np.linalg.norm(xs[0] - tg["C"]))
+        if rest <= 0.5 * rec.radius:
+            epochs.insert(0, (starts[0], ends[0], "C"))
+        else:
+            skips.append((f"out-{first}", f"the trial starts with target {first} on screen and the hand "
+                          f"{rest:.3g} m from the centre (> radius/2): no start target"))
+            seen.add(f"out-{first}")
+    for a, b, prev in epochs:
+        cur = str(names[a])
+        label = _label(prev, cur)
+        if label is None:
+            skips.append((None, f"unexpected target change {prev} -> {cur} at t = {t[a]:.3f} s "
+                          f"({rec.where(rows[a], 'target')})"))
+            continue
+        if label in seen:
+            skips.append((label, "repeated in the trial; only the first is analysed"))
+            continue
+        seen.add(label)
+        j = MOVEMENT_LABELS.index(label)
+        w = slice(a, b)
+        disp = np.max(np.linalg.norm(xs[w] - xs[a], axis=1))
+        if disp < 0.5 * rec.radius:
+            skips.append((label, f"never left the start target {prev} (largest displacement "
+                          f"{disp:.3g} m < radius/2 = {0.5 * rec.radius:.3g} m)"))
+            continue
+        if b - a < 3:
+            skips.append((label, f"the target was shown for only {b - a} samples"))
+            continue
+        on, off = segment_by_speed(speed[w], threshold=threshold)
+        if on is None or off is None:
+            side = "before" if on is None else "after"
+            skips.append((label, f"speed never fell below {threshold:.0%} of its peak {side} the peak "
+                          "within the target's window (movement cut by the cue)"))
+            continue
+        i0, i1 = a + on, a + off
+        seg = xs[i0:i1 + 1]
+        miss = np.linalg.norm(seg[-1] - targets[j, 1])
+        if miss > 0.5 * rec.radius:
+            skips.append((label, f"ended {miss:.3g} m from target {cur} (> radius/2)"))
+            continue
+        if np.dot(seg[-1] - seg[0], targets[j, 1] - targets[j, 0]) <= 0:
+            skips.append((label, "moved away from the target"))
+            continue
+        peak = np.max(speed[i0:i1 + 1])
+        still = np.flatnonzero(speed[a:i0 + 1] < 0.05 * peak)
+        tn = np.linspace(t[i0], t[i1], n_samples)
+        ev, dv = sm(tn), sm(tn, nu=1)
+        movements.append(_Movement(
+            j=j, duration=t[i1] - t[i0], path_length=np.sum(np.linalg.norm(np.diff(seg, axis=0), axis=1)),
+            peak_speed=peak, start_q=qs[i0], rest_q=qs[a + still].mean(0) if still.size else qs[a], start_x=seg[0],
+            end_x=seg[-1], norm_x=ev[:, :2], norm_q=ev[:, 2:], norm_v=np.linalg.norm(dv[:, :2], axis=1), segment=seg,
+        ))
+    for label in MOVEMENT_LABELS:
+        if label not in seen:
+            skips.append((label, f"no such movement in the trial (target {label.split('-')[1]} never shown)"))
+    return movements, skips
+
+
+def _outliers(valid, path_length, duration, iqr):
+    """Step 4: movements (s, j, k) whose path length or duration lies beyond ``iqr`` inter-quartile
+    ranges from the subject's median. Returns the valid mask without them and ``(s, j, k, reason)``."""
+    valid = valid.copy()
+    dropped = []
+    for s in range(valid.shape[0]):
+        for name, v in (("path length", path_length[s]), ("duration", duration[s])):
+            vals = v[valid[s]]
+            if vals.size < 4:
+                continue
+            med = np.median(vals)
+            spread = np.subtract(*np.percentile(vals, [75, 25]))
+            out = valid[s] & (np.abs(v - med) > iqr * spread)
+            unit = "m" if name == "path length" else "s"
+            dropped += [(s, j, k, f"{name} {v[j, k]:.3g} {unit} beyond {iqr:g} IQR ({spread:.3g} {unit}) of the "
+                         f"subject's median {med:.3g} {unit}") for j, k in zip(*np.nonzero(out))]
+            valid[s] &= ~out
+    return valid, dropped
+
+
+def _curvatures(segments, valid, targets, radius):
+    """Step 6: ``(a_sum, a_net)`` (S, L, K) of the valid movements' cut paths ``segments``
+    {(s, j, k): (n, 2)} in one batched call (paths padded by repeating the last point, which adds
+    no area); NaN elsewhere. The line joins the movement's own start and end; its direction is
+    the targets'."""
+    a_sum, a_net = np.full(valid.shape, np.nan), np.full(valid.shape, np.nan)
+    keys = [key for key in segments if valid[key]]
+    if not keys:
+        return a_sum, a_net
+    n_pad = bucket(max(segments[key].shape[0] for key in keys), minimum=16)
+    P = np.stack([np.concatenate([segments[key], np.repeat(segments[key][-1:], n_pad - segments[key].shape[0], 0)])
+                  for key in keys])
+    P = np.concatenate([P, np.repeat(P[:1], bucket(len(keys), minimum=16) - len(keys), 0)])
+    dirs = np.stack([targets[j, 1] - targets[j, 0] for _, j, _ in keys])
+    sgn = np.sign(np.einsum("bi,bi->b", P[:len(keys), -1] - P[:len(keys), 0], dirs))
+    s_, n_ = (np.asarray(v) for v in curvature_measures(P, P[:, 0], P[:, -1], scale=radius))
+    for i, key in enumerate(keys):
+        a_sum[key], a_net[key] = s_[i], sgn[i] * n_[i]
+    return a_sum, a_net
+
+
+def _too_few(subjects, n_valid, src):
+    """Exclusion entries of subjects with fewer than 2 valid movements and of subject × label cells
+    with fewer than 2 (no statistics)."""
+    out = []
+    for s, subj in enumerate(subjects):
+        if n_valid[s].sum() < 2:
+            out.append((subj, None, None, f"{src}: subject {subj!r}: only {int(n_valid[s].sum())} "
+                        "valid movement(s); no means or statistics"))
+            continue
+        out += [(subj, None, MOVEMENT_LABELS[j], f"{src}: subject {subj!r}, {MOVEMENT_LABELS[j]}: "
+                 f"{int(n_valid[s, j])} valid movement(s); no statistics") for j in np.flatnonzero(n_valid[s] < 2)]
+    return out
+
+
+def _cell_mean_sd(a, n_valid):
+    """Mean (cells with >= 1 valid movement) and SD (>= 2) over the trial axis 2 of ``a`` (S, L, K, ...)."""
+    cells = lambda m: (n_valid >= m).reshape(n_valid.shape + (1,) * (a.ndim - 3))  # noqa: E731
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN cells give NaN means
+        return (np.where(cells(1), np.nanmean(a, axis=2), np.nan),
+                np.where(cells(2), np.nanstd(a, axis=2, ddof=1), np.nan))
+
+
+def _t_tests(a_sum, a_net):
+    """Step 7: ``a_hyst`` (S, 8, K) and the p-values ``p_sum``, ``p_net`` (S, L), ``p_hyst`` (S, 8)."""
+    S, L = a_sum.shape[:2]
+    a_hyst = np.stack([a_net[:, MOVEMENT_LABELS.index(f"out-{d}")] + a_net[:, MOVEMENT_LABELS.index(f"in-{d}")]
+                       for d in DIRECTIONS], axis=1)
+    p_sum = np.array([[_ttest(a_sum[s, j]) for j in range(L)] for s in range(S)])
+    p_net = np.array([[_ttest(a_net[s, j]) for j in range(L)] for s in range(S)])
+    p_hyst = np.array([[_ttest(a_hyst[s, i]) for i in range(len(DIRECTIONS))] for s in range(S)])
+    return a_hyst, p_sum, p_net, p_hyst
+
+
 def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, threshold: float = 0.2,
                      iqr: float = 2.0) -> PointingAnalysis:
     """The paper's Section 2 "Data Analysis" of a pointing recording (module docstring).
@@ -250,172 +424,63 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
     src = rec.source
     excluded = [(s, t, None, reason) for s, t, reason in rec.skipped]
     x_all = rec.pointing
-    q_all = _joint_angles(rec.quat)
+    q_all = _joint_angles(rec.quat)  # step 1
     subjects = rec.subjects
     S, L = len(subjects), len(MOVEMENT_LABELS)
     trials = [rec.trials(s) for s in subjects]
     K = max(len(t) for t in trials)
-    lab_idx = {lab: j for j, lab in enumerate(MOVEMENT_LABELS)}
-    tg = center_out_targets(rec.radius)
-    targets = np.array([[tg["C"], tg[lab[4:]]] if lab.startswith("out") else [tg[lab[3:]], tg["C"]]
-                        for lab in MOVEMENT_LABELS])
-
-    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-    duration, path_length, peak = nan(S, L, K), nan(S, L, K), nan(S, L, K)
-    start_q, rest_q = nan(S, L, K, 3), nan(S, L, K, 3)
-    start_x, end_x = nan(S, L, K, 2), nan(S, L, K, 2)
-    norm_x, norm_q, norm_v = nan(S, L, K, n_samples, 2), nan(S, L, K, n_samples, 3), nan(S, L, K, n_samples)
-    segments = {}
-    trial_ids = np.full((S, K), -1)
-    lam = np.zeros(S)
-    dts = []
+    targets, tg = _movement_targets(rec.radius)
 
     def skip(s, trial, label, reason):
         excluded.append((subjects[s], trial, label, f"{src}: subject {subjects[s]!r}, trial {trial}"
                          + (f", {label}" if label else "") + f": {reason}"))
 
+    # steps 2–3: per subject and trial, the movements and their normalised samples
+    scalars = ("duration", "path_length", "peak_speed")
+    shapes = dict(start_q=(3,), rest_q=(3,), start_x=(2,), end_x=(2,), norm_x=(n_samples, 2), norm_q=(n_samples, 3),
+                  norm_v=(n_samples,))
+    per = {name: np.full((S, L, K) + shapes.get(name, ()), np.nan) for name in scalars + tuple(shapes)}
+    segments = {}
+    trial_ids = np.full((S, K), -1)
+    lam = np.zeros(S)
+    dts = []
     for s, subj in enumerate(subjects):
         lam[s] = _subject_lambda(rec, subj, trials[s], x_all)
         for k, trial in enumerate(trials[s]):
             trial_ids[s, k] = trial
             rows = rec.rows(subj, trial)
-            t = rec.time[rows]
-            dts.append(np.median(np.diff(t)))
-            if t.size < 8:
-                skip(s, trial, None, f"only {t.size} samples")
+            dts.append(np.median(np.diff(rec.time[rows])))
+            if rows.size < 8:
+                skip(s, trial, None, f"only {rows.size} samples")
                 continue
-            sm = smooth_path(t, np.concatenate([x_all[rows], q_all[rows]], axis=1), lam=lam[s])
-            xs, qs = sm.x[:, :2], sm.x[:, 2:]
-            speed = np.linalg.norm(sm.xdot[:, :2], axis=1)
-            names = rec.target[rows]
-            starts, ends = _epochs(names)
-            seen = set()
-            epochs = [(a, b, str(names[a - 1])) for a, b in zip(starts[1:], ends[1:])]
-            first = str(names[starts[0]])
-            if first != "C":  # a peripheral target already on screen: the hand starts where it rests
-                rest = float(np.linalg.norm(xs[0] - tg["C"]))
-                if rest <= 0.5 * rec.radius:
-                    epochs.insert(0, (starts[0], ends[0], "C"))
-                else:
-                    skip(s, trial, f"out-{first}", f"the trial starts with target {first} on screen and the hand "
-                         f"{rest:.3g} m from the centre (> radius/2): no start target")
-                    seen.add(f"out-{first}")
-            for a, b, prev in epochs:
-                cur = str(names[a])
-                label = _label(prev, cur)
-                if label is None:
-                    skip(s, trial, None, f"unexpected target change {prev} -> {cur} at t = {t[a]:.3f} s "
-                         f"({rec.where(rows[a], 'target')})")
-                    continue
-                if label in seen:
-                    skip(s, trial, label, "repeated in the trial; only the first is analysed")
-                    continue
-                seen.add(label)
-                j = lab_idx[label]
-                w = slice(a, b)
-                disp = np.max(np.linalg.norm(xs[w] - xs[a], axis=1))
-                if disp < 0.5 * rec.radius:
-                    skip(s, trial, label, f"never left the start target {prev} (largest displacement "
-                         f"{disp:.3g} m < radius/2 = {0.5 * rec.radius:.3g} m)")
-                    continue
-                if b - a < 3:
-                    skip(s, trial, label, f"the target was shown for only {b - a} samples")
-                    continue
-                on, off = segment_by_speed(speed[w], threshold=threshold)
-                if on is None or off is None:
-                    side = "before" if on is None else "after"
-                    skip(s, trial, label, f"speed never fell below {threshold:.0%} of its peak {side} the peak "
-                         "within the target's window (movement cut by the cue)")
-                    continue
-                i0, i1 = a + on, a + off
-                seg = xs[i0:i1 + 1]
-                miss = np.linalg.norm(seg[-1] - targets[j, 1])
-                if miss > 0.5 * rec.radius:
-                    skip(s, trial, label, f"ended {miss:.3g} m from target {cur} (> radius/2)")
-                    continue
-                if np.dot(seg[-1] - seg[0], targets[j, 1] - targets[j, 0]) <= 0:
-                    skip(s, trial, label, "moved away from the target")
-                    continue
-                duration[s, j, k] = t[i1] - t[i0]
-                path_length[s, j, k] = np.sum(np.linalg.norm(np.diff(seg, axis=0), axis=1))
-                peak[s, j, k] = np.max(speed[i0:i1 + 1])
-                start_q[s, j, k], start_x[s, j, k], end_x[s, j, k] = qs[i0], seg[0], seg[-1]
-                still = np.flatnonzero(speed[a:i0 + 1] < 0.05 * peak[s, j, k])
-                rest_q[s, j, k] = qs[a + still].mean(0) if still.size else qs[a]
-                tn = np.linspace(t[i0], t[i1], n_samples)
-                ev, dv = sm(tn), sm(tn, nu=1)
-                norm_x[s, j, k], norm_q[s, j, k] = ev[:, :2], ev[:, 2:]
-                norm_v[s, j, k] = np.linalg.norm(dv[:, :2], axis=1)
-                segments[(s, j, k)] = seg
-            for label in MOVEMENT_LABELS:
-                if label not in seen:
-                    skip(s, trial, label, f"no such movement in the trial (target {label.split('-')[1]} never shown)")
+            movements, skips = _trial_movements(rec, rows, lam[s], x_all, q_all, targets, tg, threshold=threshold,
+                                                n_samples=n_samples)
+            for label, reason in skips:
+                skip(s, trial, label, reason)
+            for m in movements:
+                for name, arr in per.items():
+                    arr[s, m.j, k] = getattr(m, name)
+                segments[(s, m.j, k)] = m.segment
 
-    valid = np.isfinite(duration)
-    # Subject-specific outliers of path length and duration (paper: beyond 2 IQR from the median).
-    for s in range(S):
-        for name, v in (("path length", path_length[s]), ("duration", duration[s])):
-            vals = v[valid[s]]
-            if vals.size < 4:
-                continue
-            med = np.median(vals)
-            spread = np.subtract(*np.percentile(vals, [75, 25]))
-            out = valid[s] & (np.abs(v - med) > iqr * spread)
-            for j, k in zip(*np.nonzero(out)):
-                unit = "m" if name == "path length" else "s"
-                skip(s, int(trial_ids[s, k]), MOVEMENT_LABELS[j], f"{name} {v[j, k]:.3g} {unit} beyond {iqr:g} IQR "
-                     f"({spread:.3g} {unit}) of the subject's median {med:.3g} {unit}")
-            valid[s] &= ~out
-
-    # Curvature of all valid movements in one batched call (segments padded by repeating the last
-    # point, which adds no area).
-    keys = [key for key in segments if valid[key]]
-    a_sum, a_net = nan(S, L, K), nan(S, L, K)
-    if keys:
-        n_max = max(segments[key].shape[0] for key in keys)
-        n_pad = bucket(n_max, minimum=16)
-        P = np.stack([np.concatenate([segments[key], np.repeat(segments[key][-1:], n_pad - segments[key].shape[0], 0)])
-                      for key in keys])
-        P = np.concatenate([P, np.repeat(P[:1], bucket(len(keys), minimum=16) - len(keys), 0)])
-        dirs = np.stack([targets[j, 1] - targets[j, 0] for _, j, _ in keys])
-        # The line joins the movement's own start and end; its direction is the targets'.
-        sgn = np.sign(np.einsum("bi,bi->b", P[:len(keys), -1] - P[:len(keys), 0], dirs))
-        s_, n_ = (np.asarray(v) for v in curvature_measures(P, P[:, 0], P[:, -1], scale=rec.radius))
-        for i, key in enumerate(keys):
-            a_sum[key], a_net[key] = s_[i], sgn[i] * n_[i]
-
-    for arr in (duration, path_length, peak):
+    valid, dropped = _outliers(np.isfinite(per["duration"]), per["path_length"], per["duration"], iqr)  # step 4
+    for s, j, k, reason in dropped:
+        skip(s, int(trial_ids[s, k]), MOVEMENT_LABELS[j], reason)
+    a_sum, a_net = _curvatures(segments, valid, targets, rec.radius)
+    for arr in per.values():
         arr[~valid] = np.nan
-    for arr in (start_q, rest_q, start_x, end_x, norm_x, norm_q):
-        arr[~valid] = np.nan
-    norm_v[~valid] = np.nan
     n_valid = valid.sum(-1)
-    for s in range(S):
-        if n_valid[s].sum() < 2:
-            excluded.append((subjects[s], None, None, f"{src}: subject {subjects[s]!r}: only {int(n_valid[s].sum())} "
-                             "valid movement(s); no means or statistics"))
-            continue
-        for j in np.flatnonzero(n_valid[s] < 2):
-            excluded.append((subjects[s], None, MOVEMENT_LABELS[j], f"{src}: subject {subjects[s]!r}, "
-                             f"{MOVEMENT_LABELS[j]}: {int(n_valid[s, j])} valid movement(s); no statistics"))
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN cells give NaN means
-        mean = lambda a: np.where((n_valid >= 1).reshape(n_valid.shape + (1,) * (a.ndim - 3)),  # noqa: E731
-                                  np.nanmean(a, axis=2), np.nan)
-        sd = lambda a: np.where((n_valid >= 2).reshape(n_valid.shape + (1,) * (a.ndim - 3)),  # noqa: E731
-                                np.nanstd(a, axis=2, ddof=1), np.nan)
-        mean_path, sd_path, mean_q, sd_q = mean(norm_x), sd(norm_x), mean(norm_q), sd(norm_q)
-        mean_speed, sd_speed = mean(norm_v), sd(norm_v)
-        T = mean(duration)
-    a_hyst = np.stack([a_net[:, lab_idx[f"out-{d}"]] + a_net[:, lab_idx[f"in-{d}"]] for d in DIRECTIONS], axis=1)
-    p_sum = np.array([[_ttest(a_sum[s, j]) for j in range(L)] for s in range(S)])
-    p_net = np.array([[_ttest(a_net[s, j]) for j in range(L)] for s in range(S)])
-    p_hyst = np.array([[_ttest(a_hyst[s, i]) for i in range(len(DIRECTIONS))] for s in range(S)])
+    excluded += _too_few(subjects, n_valid, src)
+    # step 5: means and SDs over the valid trials
+    mean_path, sd_path = _cell_mean_sd(per["norm_x"], n_valid)
+    mean_q, sd_q = _cell_mean_sd(per["norm_q"], n_valid)
+    mean_speed, sd_speed = _cell_mean_sd(per["norm_v"], n_valid)
+    T = _cell_mean_sd(per["duration"], n_valid)[0]
+    a_hyst, p_sum, p_net, p_hyst = _t_tests(a_sum, a_net)
     return PointingAnalysis(
-        subjects=subjects, labels=MOVEMENT_LABELS, trials=trial_ids, a_sum=a_sum, a_net=a_net, duration=duration,
-        path_length=path_length, peak_speed=peak, start_q=start_q, rest_q=rest_q, start_x=start_x, end_x=end_x,
-        valid=valid, excluded=tuple(excluded), mean_path=mean_path, sd_path=sd_path, mean_q=mean_q, sd_q=sd_q,
+        subjects=subjects, labels=MOVEMENT_LABELS, trials=trial_ids, a_sum=a_sum, a_net=a_net,
+        duration=per["duration"], path_length=per["path_length"], peak_speed=per["peak_speed"],
+        start_q=per["start_q"], rest_q=per["rest_q"], start_x=per["start_x"], end_x=per["end_x"], valid=valid,
+        excluded=tuple(excluded), mean_path=mean_path, sd_path=sd_path, mean_q=mean_q, sd_q=sd_q,
         mean_speed=mean_speed, sd_speed=sd_speed, T=T, n_valid=n_valid, targets=targets, a_hyst=a_hyst,
         p_sum=p_sum, p_net=p_net, p_hyst=p_hyst, lam=lam, radius=rec.radius, d=rec.d,
         rate=float(1.0 / np.median(dts)), threshold=float(threshold), source=src,
