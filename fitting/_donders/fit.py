@@ -18,11 +18,9 @@ isotropic orientation noise, has equal variance for every sample, so it is unwei
 
 Standard errors of the parameters come from the Gauss–Newton covariance (``fitting.covariance``).
 
-**Identifiability in the coefficients of Donders' law.** The KKT condition of the equilibrium,
-``KJ (q − q_rest) = J(q)ᵀ λ``, says ``N(q)ᵀ (KJ q − b) = 0`` with ``N(q)`` spanning the null space
-of ``J(q)`` and ``b = KJ q_rest``: every observed posture lies on a surface whose equation is
-*linear* in the coefficients ``c = (free entries of KJ, b)`` (:func:`donders_coefficients`; the
-trace fixes their scale). The log-stiffness / ``q_rest`` parameters bend this linear structure:
+**Identifiability in the coefficients of Donders' law.** Every observed posture lies on a surface
+whose equation is *linear* in the coefficients ``c = (free entries of KJ, b = KJ q_rest)``
+(``fitting._donders.coefficients``). The log-stiffness / ``q_rest`` parameters bend this linear structure:
 at 0.5° noise the fit wanders far along the 2–3 directions that ±20° of torsion data cannot pin
 down, and the curvature of the map drags even the best-determined parameter combinations 5–35
 Gauss–Newton standard errors away from the truth. In ``c`` the residual is nearly linear, so the
