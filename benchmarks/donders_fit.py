@@ -94,7 +94,7 @@ from scipy.optimize import minimize  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
-from fitting._donders import _fit_batch, _starts  # noqa: E402
+from fitting._donders import fit_nio_batch, nio_starts  # noqa: E402
 
 N_POST = 500
 N_STARTS = 2
@@ -177,11 +177,11 @@ def jax_fit(rec, S, chunk):
     Np = 1 << (N_POST - 1).bit_length()  # fit_donders pads samples to a power of two (masked)
     x, q, w = (np.concatenate([a, np.zeros((S, Np - N_POST) + a.shape[2:])], 1) for a in (x, q, w))
     q_mean = rec.joint_angles[:S].mean(1)
-    th0 = _starts(q_mean, 5, 3, N_STARTS, 0)
+    th0 = nio_starts(q_mean, 5, 3, N_STARTS, 0)
     c = min(chunk, S)
     opts = dict(n_k=5, trace=4.0, kind="torsion", tol=1e-10, max_steps=100, rcond=1e-2)
     t = time.perf_counter()
-    _fit_batch.lower(pj.Wrist(), th0[:c], x[:c], q[:c], w[:c], **opts).compile()
+    fit_nio_batch.lower(pj.Wrist(), th0[:c], x[:c], q[:c], w[:c], **opts).compile()
     t_compile = time.perf_counter() - t
     t = time.perf_counter()
     fit = fitting.fit_donders(
@@ -282,16 +282,16 @@ def floor(rec, fit):
     chunk (CHUNK subjects × N_STARTS starts), times the LM steps: ``ideal`` uses each start's own
     step count (no vmap lane waiting), ``chunked`` the chunk's slowest start (what a vmapped
     while_loop pays)."""
-    from fitting._donders import _residual_fn
+    from fitting._donders import nio_residual
 
-    resid = _residual_fn(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
+    resid = nio_residual(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
     lin = jax.jit(jax.vmap(jax.vmap(jax.jacfwd(resid), in_axes=(0, None)), in_axes=(0, 0)))
     S = CHUNK
     x, q = rec.pointing[:S], rec.joint_angles[:S]
     Np = 1 << (N_POST - 1).bit_length()
     w = np.ones(x.shape[:2])
     x, q, w = (np.concatenate([a, np.zeros((S, Np - N_POST) + a.shape[2:])], 1) for a in (x, q, w))
-    th = _starts(rec.joint_angles[:S].mean(1), 5, 3, N_STARTS, 0)
+    th = nio_starts(rec.joint_angles[:S].mean(1), 5, 3, N_STARTS, 0)
     args = (th, (x, q, w))
     jax.block_until_ready(lin(*args))
     t_eval = min(_timeit(lambda: jax.block_until_ready(lin(*args))) for _ in range(3))

@@ -45,7 +45,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _baselines import write_results  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from fitting._donders import _residual_fn, _starts  # noqa: E402
+from fitting._donders import nio_residual, nio_starts  # noqa: E402
 from fitting._optimise import least_squares  # noqa: E402
 
 N_POST, N_STARTS, MAX_STEPS = 500, 2, 100
@@ -56,11 +56,11 @@ def data(S):
     idx = np.arange(S) % 6
     rec = pj.synthetic_recordings(K[idx], q[idx], N_POST, noise_deg=0.5, seed=3)
     x, qo = rec.pointing, rec.joint_angles
-    th0 = _starts(qo.mean(1), 5, 3, N_STARTS, 0)
+    th0 = nio_starts(qo.mean(1), 5, 3, N_STARTS, 0)
     return jnp.asarray(th0), jnp.asarray(x), jnp.asarray(qo), jnp.ones(x.shape[:2])
 
 
-RESID = _residual_fn(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
+RESID = nio_residual(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
 
 
 @jax.jit

@@ -69,8 +69,8 @@ from _baselines import write_results  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
-from fitting._pointing import _silverman_weights  # noqa: E402
-from fitting._time_constants import FIT_DT, FIT_SPAN, _fit_items, _item_data  # noqa: E402
+from fitting._pointing.observe import _silverman_weights  # noqa: E402
+from fitting._pointing.time_constants import FIT_DT, FIT_SPAN, _fit_items, _item_data  # noqa: E402
 
 
 def load():

@@ -1,6 +1,6 @@
 """Benchmark: a 1 000 000-movement curvature sweep with ``fitting.sweep``.
 
-Kernel (``fitting._sweep_examples.curvature_row``): one parameter row = the 8 outbound λ0-PMP
+Kernel (``fitting._sweep.examples.curvature_row``): one parameter row = the 8 outbound λ0-PMP
 center-out movements of the wrist (Figure 3 set-up, 0.4 s, coarse dt = 10 ms RK4, every step
 saved; ``A_net`` within 1 % of dt = 1 ms, while 20 ms is unstable) for one stiffness anisotropy ×
 rest posture, reduced to ``A_net``, ``A_sum`` per target (``pmpjax.curvature_measures``) and a
@@ -86,7 +86,7 @@ def _params(rows: int):
 def _kernel():
     import functools
 
-    from fitting._sweep_examples import curvature_row
+    from fitting._sweep import curvature_row
 
     return functools.partial(curvature_row, dt=DT)
 
@@ -134,7 +134,7 @@ def child(cfg: dict) -> dict:
     if cfg.get("memory_only"):
         return res
     # the bare kernel on the same chunks: the sweep's own compiled kernel (no store, no bookkeeping)
-    from fitting._sweep import _LocalEngine
+    from fitting._sweep.engines import _LocalEngine
 
     kernel_key = next(reversed(_LocalEngine._kernels))[0]  # the sweep's compiled kernel and its placement
     engine = _LocalEngine(fn, jax.local_devices(), CHUNK, kernel_key)
@@ -225,7 +225,7 @@ def store_formats():
         return []
     from pathlib import Path
 
-    from fitting._sweep import _atomic_write
+    from fitting._sweep.store import _atomic_write
 
     ch = 10_000
     rows_out = []

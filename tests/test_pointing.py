@@ -502,7 +502,7 @@ def test_time_constants_recover_the_generating_values(analysis, experiment):
 def test_time_constant_fits_take_the_stiff_solver_where_rk4_is_unstable(analysis, experiment):
     # Eq 10's gain at anisotropic stiffness (cond 1e3): RK4 at the fits' step would diverge, so the
     # fit simulates with RODAS4 and says so; at the subjects' own stiffness RK4 is stable.
-    from fitting._time_constants import FIT_DT, _item_data, _solver
+    from fitting._pointing.time_constants import FIT_DT, _item_data, _solver
 
     ex, _ = experiment
     Q, _ = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
@@ -528,7 +528,7 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
     torsion residual w.r.t. log-stiffness, q_rest, log τ0, log τ — against central differences."""
     import jax
 
-    from fitting._time_constants import _fit_joint, _joint_inputs, _joint_residual
+    from fitting._pointing.time_constants import _fit_joint, _joint_inputs, _joint_residual
 
     ex, _ = experiment
     tr, d = ex.truth, ex.donders
@@ -549,7 +549,7 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
     Jac = np.asarray(res.jac[0])
     r = np.asarray(residual(x, one))
     np.testing.assert_allclose(r, np.asarray(res.residual[0]), rtol=1e-9, atol=1e-12)
-    for i, name in enumerate(fitting._time_constants.JOINT_PARAMS):
+    for i, name in enumerate(fitting._pointing.time_constants.JOINT_PARAMS):
         h = np.sqrt(np.finfo(float).eps) * max(1.0, abs(x[i]))
         e = np.zeros(10)
         e[i] = h

@@ -24,12 +24,16 @@ from scipy.optimize import minimize
 
 import fitting
 import pmpjax as pj
-from fitting import _reaching as R
 from fitting._app.parts import REACHING_QUICK
+from fitting._reaching import fit as rfit
+from fitting._reaching import model as rmodel
+from fitting._reaching import motions as rmotions
+from fitting._reaching import predict as rpredict
+from pmpjax.internal import hugmp_directory
 
-BUNDLED = R.hugmp_directory()
+BUNDLED = hugmp_directory()
 # the synthetic truth's cond(KJ) = 1e3 lies beyond the default bound (100): raised here
-CFG = R._Config("lambda0", "tau0_KJ", "fitted", 5, cond_max=1e4)
+CFG = rmodel._Config("lambda0", "tau0_KJ", "fitted", 5, cond_max=1e4)
 FIT = dict(model="lambda0", damping="tau0_KJ", time_constants="fitted")
 # board targets reached by each motion of tasks 1-4 (README: "R → 1 → 12 → R → 4 → 9 → R", ...)
 SEQUENCES = {1: "R 1 12 R 4 9 R", 2: "R 2 10 R 9 11 R", 3: "R 10 2 R 11 9 R", 4: "R 1 R 3 R 9 R 11 R"}
@@ -82,7 +86,7 @@ def lambda0_movement(q0, x_d, KJ, q_rest, tau, tau0, T_rec):
     W = tau0 * KJ
     J0 = arm_jac_fd(q0)
     k = np.linalg.eigvalsh(np.linalg.inv(J0 @ np.linalg.inv(W) @ J0.T))[-1] / tau0
-    t = np.linspace(0.0, T_rec, R.SAMPLES)
+    t = np.linspace(0.0, T_rec, rmotions.SAMPLES)
     sol = solve_ivp(lambda tt, q: lambda0_qdot(q, tt, x_d, KJ, q_rest, W, k, tau), (0.0, T_rec), q0,
                     method="LSODA", t_eval=t, rtol=1e-10, atol=1e-12)
     assert sol.success
@@ -117,9 +121,9 @@ def synthetic():
     q_obs = np.stack([lambda0_movement(q0, xd, TRUTH["KJ"], TRUTH["q_rest"], TRUTH["tau_over_T"] * t,
                                        TRUTH["tau0_over_T"] * t, tr)
                       for q0, xd, t, tr in zip(q0s, targets, T, T_rec)])
-    x_obs = arm_fk_batch(q_obs.reshape(-1, 4)).reshape(12, R.SAMPLES, 3)
+    x_obs = arm_fk_batch(q_obs.reshape(-1, 4)).reshape(12, rmotions.SAMPLES, 3)
     n = len(T)
-    return R._Motions("SYN", np.ones(n, int), np.ones(n, int), np.arange(1, n + 1), q_obs, x_obs, T, T_rec)
+    return rmotions._Motions("SYN", np.ones(n, int), np.ones(n, int), np.arange(1, n + 1), q_obs, x_obs, T, T_rec)
 
 
 # --- the arm -----------------------------------------------------------------------------------
@@ -162,7 +166,7 @@ def test_recorded_hand_positions_cluster_per_board_target():
             for _, i, q in sub.motions[task]:
                 if i < len(seq) and seq[i] != "R":
                     ends.setdefault(int(seq[i]), []).append(q[-1])
-        pts = {k: R._fk(arm, np.array(v)) for k, v in ends.items()}  # one compiled (padded) call
+        pts = {k: rmotions._fk(arm, np.array(v)) for k, v in ends.items()}  # one compiled (padded) call
         cen = {k: p.mean(0) for k, p in pts.items()}
         rms = {k: np.sqrt(np.mean(np.sum((p - cen[k]) ** 2, -1))) for k, p in pts.items()}
         assert set(cen) == {1, 2, 3, 4, 9, 10, 11, 12}
@@ -187,7 +191,7 @@ def test_recorded_hand_positions_cluster_per_board_target():
 
 @pytest.fixture(scope="module")
 def synthetic_fit(synthetic):
-    return R._fit_motions([synthetic], CFG, max_steps=(40, 40))
+    return rfit._fit_motions([synthetic], CFG, max_steps=(40, 40))
 
 
 def test_synthetic_movements_have_ended(synthetic):
@@ -198,13 +202,13 @@ def test_synthetic_movements_have_ended(synthetic):
 
 def test_fit_recovers_known_parameters(synthetic, synthetic_fit):
     out = synthetic_fit
-    p = {k: np.asarray(v) for k, v in R._unpack(jnp.asarray(out["x"][0]), CFG, out["elbow"][0]).items()}
+    p = {k: np.asarray(v) for k, v in rmodel._unpack(jnp.asarray(out["x"][0]), CFG, out["elbow"][0]).items()}
     KJ = TRUTH["KJ"] * 4 / np.trace(TRUTH["KJ"])
     # the truth's rest posture in the fit's gauge: shifted along KJ⁻¹ e4 to the fixed elbow angle
     d = np.linalg.solve(KJ, np.eye(4)[3])
     q_rest = TRUTH["q_rest"] + (out["elbow"][0] - TRUTH["q_rest"][3]) / d[3] * d
     assert out["converged"][0] and out["stage"] == 2 and out["steps2"][0] > 0
-    assert out["solver"] == "rodas4" and out["integration_error_deg"][0] < R.INTEGRATION_TOL_DEG
+    assert out["solver"] == "rodas4" and out["integration_error_deg"][0] < rmodel.INTEGRATION_TOL_DEG
     assert np.linalg.norm(p["KJ"] - KJ) / np.linalg.norm(KJ) < 0.05
     # every eigenvalue (the softest is 1/1000 of the stiffest) within 5 %
     np.testing.assert_allclose(np.linalg.eigvalsh(p["KJ"]), np.linalg.eigvalsh(KJ), rtol=0.05)
@@ -215,7 +219,7 @@ def test_fit_recovers_known_parameters(synthetic, synthetic_fit):
     assert abs(p["tau"] / TRUTH["tau_over_T"] - 1) < 0.05
     assert abs(p["tau0"] / TRUTH["tau0_over_T"] - 1) < 0.05
     # stage 1 alone (final postures) cannot pin KJ down from 12 movements; the trajectories do
-    KJ1 = np.asarray(R.stiffness_from_params(jnp.asarray(out["x1"][0, :9]), 4, 4.0))
+    KJ1 = np.asarray(fitting.stiffness_from_params(jnp.asarray(out["x1"][0, :9]), 4, 4.0))
     assert np.linalg.norm(KJ1 - KJ) / np.linalg.norm(KJ) > 2 * np.linalg.norm(p["KJ"] - KJ) / np.linalg.norm(KJ)
     # standard errors exist and are finite for every parameter
     assert np.all(np.isfinite(out["se"][0])) and np.all(out["se"][0] > 0)
@@ -228,7 +232,7 @@ def test_fit_jacobian_matches_central_differences(synthetic, synthetic_fit):
     theta = synthetic_fit["x"][0] + rng.normal(scale=0.02, size=synthetic_fit["x"][0].shape)
     # max_steps 0: the residual and its Jacobian at theta0 (the fit's compiled stage 2)
     run = dict(max_steps=(0, 0), steps=synthetic_fit["steps_per_sample"], solver=synthetic_fit["solver"])
-    at = R._fit_motions([synthetic], CFG, theta0=theta[None], keep_jac=True, **run)
+    at = rfit._fit_motions([synthetic], CFG, theta0=theta[None], keep_jac=True, **run)
     J = at["jac"][0]
     assert np.all(np.isfinite(J)) and np.abs(J).max() > 1e-3
     # the movements are stiff (cond KJ = 1e3): rounding in the simulations is amplified, so the
@@ -236,7 +240,7 @@ def test_fit_jacobian_matches_central_differences(synthetic, synthetic_fit):
     h = 1e-5
     for v in rng.normal(size=(3, theta.size)):
         v /= np.linalg.norm(v)
-        rp, rm = (R._fit_motions([synthetic], CFG, theta0=(theta + sgn * h * v)[None], **run)["residual"][0]
+        rp, rm = (rfit._fit_motions([synthetic], CFG, theta0=(theta + sgn * h * v)[None], **run)["residual"][0]
                   for sgn in (1, -1))
         fd = (rp - rm) / (2 * h)
         assert np.allclose(J @ v, fd, atol=2e-6 * np.abs(fd).max())
@@ -264,14 +268,14 @@ def test_free_damping_variants_start_inside_the_paper_model(rng):
         theta = jnp.asarray(np.r_[s, np.deg2rad([-30.0, -35.0, -5.0])])
         KJ = kj_ref(s)
         for tc in ("tied", "fitted"):
-            ref = R._unpack(R._stage2_start(theta, R._Config("lambda0", "tau0_KJ", tc, 5)),
-                            R._Config("lambda0", "tau0_KJ", tc, 5), elbow)
+            ref = rmodel._unpack(rmodel._stage2_start(theta, rmodel._Config("lambda0", "tau0_KJ", tc, 5)),
+                                 rmodel._Config("lambda0", "tau0_KJ", tc, 5), elbow)
             np.testing.assert_allclose(ref["W"], KJ, atol=1e-12)
             for damping in ("full", "diagonal"):
-                cfg = R._Config("lambda0", damping, tc, 5)
-                th = R._stage2_start(theta, cfg)
-                assert th.shape == (len(R._param_names(cfg)),)
-                p = R._unpack(th, cfg, elbow)
+                cfg = rmodel._Config("lambda0", damping, tc, 5)
+                th = rmodel._stage2_start(theta, cfg)
+                assert th.shape == (len(rmodel._param_names(cfg)),)
+                p = rmodel._unpack(th, cfg, elbow)
                 for key in ("KJ", "q_rest", "tau", "tau0"):
                     np.testing.assert_allclose(p[key], ref[key], rtol=1e-12, err_msg=f"{damping} {tc} {key}")
                 nested = damping == "full" or not s[3:].any()
@@ -279,12 +283,12 @@ def test_free_damping_variants_start_inside_the_paper_model(rng):
                                            err_msg=f"{damping} {tc} W")
     # stage 1 sees only KJ and q_rest: its residual (12 parameters) must not depend on the damping
     # variant (damping="full" used to read W entries past the end of the stage-1 vector and fail)
-    m = R._motions(2, None, (1,), (1,))
-    data = {k: jnp.asarray(v[0]) for k, v in R._stack_motions([m]).items()}
+    m = rmotions._motions(2, None, (1,), (1,))
+    data = {k: jnp.asarray(v[0]) for k, v in rfit._stack_motions([m]).items()}
     th = jnp.asarray(np.r_[np.zeros(9), m.q_obs[:2, -1, :3].mean(0)])
-    ref = R._final_residual(th, data, R._Config("lambda0", "tau0_KJ", "tied", 5))
+    ref = rmodel._final_residual(th, data, rmodel._Config("lambda0", "tau0_KJ", "tied", 5))
     assert np.all(np.isfinite(ref)) and np.abs(ref).max() > 1e-3
-    np.testing.assert_array_equal(R._final_residual(th, data, R._Config("lambda0", "full", "fitted", 5)), ref)
+    np.testing.assert_array_equal(rmodel._final_residual(th, data, rmodel._Config("lambda0", "full", "fitted", 5)), ref)
 
 # --- real recordings: the held-out split, predictions, bad input --------------------------------
 
@@ -342,9 +346,9 @@ def clean_fit(folders):
 
 def test_held_out_repetitions_never_enter_the_fit(folders, clean_fit, monkeypatch):
     seen = []
-    stack = R._stack_motions
-    monkeypatch.setattr(R, "_stack_motions", lambda ms, **kw: (seen.extend(np.concatenate([m.rep for m in ms])),
-                                                                  stack(ms, **kw))[1])
+    stack = rfit._stack_motions
+    monkeypatch.setattr(rfit, "_stack_motions", lambda ms, **kw: (seen.extend(np.concatenate([m.rep for m in ms])),
+                                                                 stack(ms, **kw))[1])
     poisoned = fitting.fit_reaching([2], directory=folders["poisoned"], **SMALL)
     assert seen and set(seen) <= {1, 2}
     for name in ("KJ", "q_rest", "W", "params", "loss", "stderr", "ik_weights", "mean_posture", "status"):
@@ -361,7 +365,7 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     N = len(pr.task)
     assert N > 0 and set(pr.rep) <= {8, 9, 10} and set(pr.task) == {1} and set(pr.subject) == {"S02"}
     assert pr.q_obs.shape == pr.q_pred.shape == (N, 50, 4) and pr.final_error_deg.shape == pr.rmse_deg.shape == (N,)
-    assert set(pr.baselines) == set(R.BASELINES)
+    assert set(pr.baselines) == set(rpredict.BASELINES)
     # q_obs is the recording: its first and last samples are the recorded first and last postures
     raw = {(r, i): q for r, i, q in pj.load_hugmp(2, folders["clean"]).motions[1]}
     for k in range(N):
@@ -389,7 +393,7 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     assert np.all(np.isfinite(pr.baselines["ik_weights_minjerk"].rmse_deg))
     assert np.all(np.isfinite(pr.baselines["lambda0_unfitted"].rmse_deg))
     rows = pr.summary()
-    assert {r["predictor"] for r in rows} == {"model", *R.BASELINES} and all(r["n"] > 0 for r in rows)
+    assert {r["predictor"] for r in rows} == {"model", *rpredict.BASELINES} and all(r["n"] > 0 for r in rows)
     # Donders' law of the fitted model: the final posture minimises the elastic energy
     # ½ (q − q_rest)ᵀ KJ (q − q_rest) on the arm's postures that put the hand on the target (SciPy
     # SLSQP on the README formula, started at the recorded final posture)
@@ -470,14 +474,14 @@ def test_stiffness_bound_holds_and_is_reported(folders):
     assert 1.2 * 0.93 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
     assert tight.stiffness_cond[0] == pytest.approx(cond(tight.KJ[0])) and tight.stiffness_cond_max == 1.2
     # the rest-angle bounds: the subject's recorded range widened by REST_MARGIN_DEG, held likewise
-    m = R._motions(2, folders["clean"], SMALL["reps"], (1, 2))
-    lo = m.q_obs[..., :3].min((0, 1)) - np.deg2rad(R.REST_MARGIN_DEG)
-    hi = m.q_obs[..., :3].max((0, 1)) + np.deg2rad(R.REST_MARGIN_DEG)
+    m = rmotions._motions(2, folders["clean"], SMALL["reps"], (1, 2))
+    lo = m.q_obs[..., :3].min((0, 1)) - np.deg2rad(rmodel.REST_MARGIN_DEG)
+    hi = m.q_obs[..., :3].max((0, 1)) + np.deg2rad(rmodel.REST_MARGIN_DEG)
     slack = np.deg2rad(0.5)
     for f in (free, tight):
         q = f.q_rest[0, :3]
         assert np.all((q > lo - slack) & (q < hi + slack))
-        w = 3 * R.BOUND_WIDTH[1]
+        w = 3 * rmodel.BOUND_WIDTH[1]
         assert np.array_equal(f.bound_active[0, 1:], (q < lo + w) | (q > hi - w))
 
 
@@ -492,7 +496,7 @@ def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fi
     assert res["status"] == "ok", res.get("error")
     assert (tmp_path / "reaching_hugmp_S02.png").read_bytes()[:4] == b"\x89PNG"
     rows = {r["predictor"]: r for r in csv.DictReader((tmp_path / "reaching_hugmp.csv").open())}
-    assert set(rows) == {"model", *R.BASELINES}
+    assert set(rows) == {"model", *rpredict.BASELINES}
     pr = fitting.predict_reaching(clean_fit, reps=(8, 9, 10))  # the bundled S02 equals the clean copy
     assert float(rows["model"]["rmse_deg"]) == pytest.approx(float(np.nanmean(pr.rmse_deg)), rel=1e-5)
     assert float(rows["joint_minjerk_oracle"]["final_error_deg"]) < 1e-9

@@ -376,7 +376,7 @@ def test_donders_power_rows_report_the_fits_status_codes():
     # cannot have converged (MAX_STEPS), 3 postures cannot determine 8 parameters (TOO_FEW_DATA).
     from functools import partial
 
-    from fitting._sweep_examples import donders_power_row
+    from fitting._sweep import donders_power_row
 
     rows = dict(logK=jnp.zeros((2, 5)), q_rest=jnp.zeros((2, 3)), n_postures=jnp.array([40, 3]),
                 noise_deg=jnp.array([0.5, 0.5]), seed=jnp.array([0, 1]))

@@ -237,14 +237,15 @@ def _analyze_pointing(args) -> int:
     import pmpjax as pj
 
     from .._donders import fit_donders
-    from .._pointing import analyze_pointing, predict_pointing
-    from .._pointing_plots import (
+    from .._pointing import (
+        analyze_pointing,
+        fit_time_constants,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
+        predict_pointing,
     )
-    from .._time_constants import fit_time_constants
 
     try:
         rec = pj.read_pointing(args.file, on_invalid="skip" if args.skip_invalid else "raise")

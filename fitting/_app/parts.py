@@ -115,8 +115,7 @@ def _sweeps_in(ctx, store: Path) -> dict:
     import pmpjax as pj
 
     from .._donders import params_from_stiffness
-    from .._sweep import grid, sweep
-    from .._sweep_examples import curvature_row, donders_power_row, plot_curvature_map
+    from .._sweep import curvature_row, donders_power_row, grid, plot_curvature_map, sweep
 
     anisotropy = np.array([0.5, 1.0, 2.0]) if ctx.quick else np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
     rest_ps = np.linspace(-15.0, 15.0, 3 if ctx.quick else 7)
@@ -287,14 +286,15 @@ def _pointing(ctx) -> dict:
     import pmpjax as pj
 
     from .._donders import fit_donders
-    from .._pointing import analyze_pointing, predict_pointing
-    from .._pointing_plots import (
+    from .._pointing import (
+        analyze_pointing,
+        fit_time_constants,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
+        predict_pointing,
     )
-    from .._time_constants import fit_time_constants
 
     # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
     # fitted time constants can be told apart.

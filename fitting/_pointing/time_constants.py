@@ -40,15 +40,11 @@ import numpy as np
 from pmpjax import Status, Wrist
 from pmpjax.internal import MODEL_DT, MODEL_SPAN, check_positive_int, fast_compile_jit, normalised_movements
 
-from ._optimise import covariance, least_squares
-from ._pointing import (
-    PointingAnalysis,
-    _check_params,
-    _kernel_halfwidth,
-    _movement_inputs,
-    _profiles,
-    spline_bandwidth,
-)
+from .._donders import nio_residual
+from .._optimise import covariance, least_squares, params_from_stiffness, stiffness_from_params
+from .analysis import PointingAnalysis
+from .observe import _kernel_halfwidth, _profiles, spline_bandwidth
+from .prediction import _check_params, _movement_inputs
 
 STOL = float(os.environ.get("TC_STOL", "1e-4"))
 
@@ -258,9 +254,7 @@ JOINT_PARAMS = ("logK[PS,PS]", "logK[FE,FE]", "logK[PS,FE]", "logK[PS,RUD]", "lo
 def _joint_residual(opts, n_torsion):
     """Residual of one subject: torsion of the Donders postures (``n_torsion`` entries, weighted)
     then the paths (weighted), as a function of θ (10,) and the subject's data."""
-    from ._donders import _residual_fn, stiffness_from_params
-
-    torsion = _residual_fn(Wrist(opts["d"]), 5, 4.0, "torsion", 1e-10)
+    torsion = nio_residual(Wrist(opts["d"]), 5, 4.0, "torsion", 1e-10)
     popts = {k: v for k, v in opts.items()}
 
     def residual(theta, data):
@@ -288,8 +282,6 @@ def _fit_joint(theta0, data, *, opts, max_steps, n_torsion):
 
 def _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau):
     from pmpjax import DondersRecording, fit_donders_surface, rotvec_from_joint_angles
-
-    from ._donders import params_from_stiffness
 
     if not isinstance(donders, DondersRecording):
         raise TypeError(f"`donders` must be a pmpjax.DondersRecording (pmpjax.read_recordings), got "
@@ -349,8 +341,6 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
     theta0, jdata, opts, has, Np = _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau)
     res, se = jax.device_get(_fit_joint(theta0, jax.tree_util.tree_map(jnp.asarray, jdata), opts=opts,
                                         max_steps=int(max_steps), n_torsion=Np))
-    from ._donders import stiffness_from_params
-
     x = np.asarray(res.x)
     KJf = np.stack([np.asarray(stiffness_from_params(jnp.asarray(v[:5]), 3, 4.0)) for v in x])
     r = np.asarray(res.residual)

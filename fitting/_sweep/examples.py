@@ -4,8 +4,8 @@
   from the centre to the 8 targets for one stiffness anisotropy and rest posture; ``A_net``,
   ``A_sum`` per target (``pmpjax.curvature_measures``) and a per-movement status.
 - :func:`donders_power_row`: one synthetic subject's Donders NIO fit (``fitting._donders``'s
-  compiled fit, the one behind ``fitting.fit_donders``) from ``n`` noisy steady postures; the
-  error of the fitted ``KJ``.
+  compiled fit ``fit_nio_batch``, the one behind ``fitting.fit_donders``) from ``n`` noisy steady
+  postures; the error of the fitted ``KJ``.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ def donders_power_row(p, *, n_max: int = N_MAX, n_starts: int = 2, max_steps: in
     """
     from pmpjax.internal import equilibrium_one
 
-    from ._donders import _fit_batch, _starts, stiffness_from_params
+    from .._donders import fit_nio_batch, nio_starts, stiffness_from_params
 
     chain = pj.Wrist()
     KJ = stiffness_from_params(p["logK"], 3)
@@ -102,8 +102,8 @@ def donders_power_row(p, *, n_max: int = N_MAX, n_starts: int = 2, max_steps: in
     w = (jnp.arange(n_max) < p["n_postures"]).astype(float)
     q_mean = jnp.sum(q_obs * w[:, None], 0) / jnp.maximum(jnp.sum(w), 1.0)
     # fit_donders' starts: isotropic KJ at the mean observed posture, then seeded perturbations
-    theta0 = jnp.asarray(_starts(np.zeros((1, 3)), 5, 3, n_starts, 0)).at[..., 5:].add(q_mean)
-    out = _fit_batch(chain, theta0, x_obs[None], q_obs[None], w[None], n_k=5, trace=4.0, kind="torsion",
+    theta0 = jnp.asarray(nio_starts(np.zeros((1, 3)), 5, 3, n_starts, 0)).at[..., 5:].add(q_mean)
+    out = fit_nio_batch(chain, theta0, x_obs[None], q_obs[None], w[None], n_k=5, trace=4.0, kind="torsion",
                      tol=1e-10, max_steps=max_steps, rcond=1e-2)
     KJ_fit = out["KJ"][0]
     return {"KJ_error": jnp.max(jnp.abs(KJ_fit - KJ)), "KJ_fit": KJ_fit, "status": out["status"][0]}

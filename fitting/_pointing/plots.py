@@ -11,7 +11,8 @@ import numpy as np
 
 from pmpjax import DIRECTIONS
 
-from ._pointing import PointingAnalysis, PointingPrediction
+from .analysis import PointingAnalysis
+from .prediction import PointingPrediction
 
 _JOINT_NAMES = ("pronation–supination", "flexion–extension", "radial–ulnar deviation")
 _JOINT_COLORS = ("tab:red", "tab:purple", "tab:green")

@@ -6,12 +6,8 @@ minimise the squared mismatch with the observed postures, by ``fitting.least_squ
 (Levenberg–Marquardt).
 
 **Parameterisation.** ``KJ = t · expm(S) / tr(expm(S))`` with ``S`` symmetric and traceless
-(``n(n+1)/2 − 1`` numbers: 5 for the wrist) and ``t`` the trace (4 Nm/rad). This map is a smooth
-bijection from traceless symmetric matrices onto SPD matrices of trace ``t`` (matrix log, then
-normalise), so every parameter vector is valid, no constraint or penalty is needed, the
-parameter count equals the true number of degrees of freedom (no built-in flat direction, unlike
-a normalised Cholesky factor), and there is no eigenvector-ordering ambiguity or singularity at
-equal eigenvalues (unlike eigenvalue + rotation parameterisations). ``S = 0`` is isotropic.
+(``n(n+1)/2 − 1`` numbers: 5 for the wrist) and ``t`` the trace (4 Nm/rad): every parameter
+vector is valid (``fitting._optimise.spd``).
 
 **Residual.** ``residual="torsion"`` (default, wrist only): the signed angle of ``R_obsᵀ R_model``
 about the pointing axis [rad], one number per sample. Model and observation point at the same
@@ -22,11 +18,9 @@ isotropic orientation noise, has equal variance for every sample, so it is unwei
 
 Standard errors of the parameters come from the Gauss–Newton covariance (``fitting.covariance``).
 
-**Identifiability in the coefficients of Donders' law.** The KKT condition of the equilibrium,
-``KJ (q − q_rest) = J(q)ᵀ λ``, says ``N(q)ᵀ (KJ q − b) = 0`` with ``N(q)`` spanning the null space
-of ``J(q)`` and ``b = KJ q_rest``: every observed posture lies on a surface whose equation is
-*linear* in the coefficients ``c = (free entries of KJ, b)`` (:func:`donders_coefficients`; the
-trace fixes their scale). The log-stiffness / ``q_rest`` parameters bend this linear structure:
+**Identifiability in the coefficients of Donders' law.** Every observed posture lies on a surface
+whose equation is *linear* in the coefficients ``c = (free entries of KJ, b = KJ q_rest)``
+(``fitting._donders.coefficients``). The log-stiffness / ``q_rest`` parameters bend this linear structure:
 at 0.5° noise the fit wanders far along the 2–3 directions that ±20° of torsion data cannot pin
 down, and the curvature of the map drags even the best-determined parameter combinations 5–35
 Gauss–Newton standard errors away from the truth. In ``c`` the residual is nearly linear, so the
@@ -45,123 +39,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pmpjax import Chain, Status, Wrist, equilibrium_posture, rotvec_from_joint_angles, torsion_between, wrist_rotation
+from pmpjax import Chain, Status, Wrist, rotvec_from_joint_angles, torsion_between, wrist_rotation
 from pmpjax.internal import (
     as_array,
     bucket,
     check_finite_masked,
     check_positive_int,
-    check_spd,
     equilibrium_one,
     fast_compile_jit,
-    on_host,
     pad_rows,
     replace,
-    to_jax,
 )
 
-from ._optimise import covariance, least_squares
-
-_WRIST_JOINTS = ("PS", "FE", "RUD")
-
-
-# --- parameterisation ---------------------------------------------------------------------
-
-
-def _sym_index(n):
-    """Index pairs of the free entries of a traceless symmetric n×n matrix: diagonal 0..n−2, then
-    the upper triangle row by row."""
-    return [(i, i) for i in range(n - 1)] + [(i, j) for i in range(n) for j in range(i + 1, n)]
-
-
-def stiffness_from_params(s, n: int, trace: float = 4.0):
-    """``KJ`` (n, n) SPD with ``tr KJ = trace`` from ``s`` (n(n+1)/2 − 1,): ``t expm(S)/tr expm(S)``."""
-    return _stiffness_from_params(_params_vector("s", s, n, n * (n + 1) // 2 - 1), n, trace)
-
-
-def log_stiffness(s, n):
-    """The traceless symmetric ``S`` (n, n) of parameters ``s`` (n(n+1)/2 − 1,) (JAX):
-    ``KJ ∝ expm(S)``, so ``cond(KJ) = exp(λ_max(S) − λ_min(S))``."""
-    S = jnp.zeros((n, n), s.dtype)
-    for k, (i, j) in enumerate(_sym_index(n)):
-        S = S.at[i, j].set(s[k]).at[j, i].set(s[k])
-    return S.at[n - 1, n - 1].set(-sum(s[k] for k in range(n - 1)))
-
-
-@partial(fast_compile_jit, static_argnums=1)
-def _stiffness_from_params(s, n, trace):
-    E = _expm_sym(log_stiffness(s, n))
-    return trace * E / jnp.trace(E)
-
-
-def _params_vector(name, v, n, size):
-    """Shape checks (before tracing) of a parameter vector of an n-joint chain."""
-    if int(n) != n or n < 2:
-        raise ValueError(f"`n` must be an integer >= 2 (joints), got {n}")
-    v = to_jax(as_array(name, v, tail=(size,)))
-    if v.ndim != 1:
-        raise ValueError(f"`{name}` must be a vector of shape ({size},) for n = {n}, got {v.shape}")
-    return v
-
-
-def _expm_sym(S, squarings: int = 6, order: int = 10):
-    """``expm(S)`` by scaling and squaring a degree-10 Taylor polynomial (Horner). For
-    ``|S|₂ ≤ 8`` (eigenvalue ratios up to e¹⁶) the truncation error is < 1e-15 relative; a small
-    graph (compile time) and exact derivatives. ``S`` is symmetric so ``E`` is too."""
-    A = S / 2.0**squarings
-    eye = jnp.eye(S.shape[0], dtype=S.dtype)
-    E = eye
-    for k in range(order, 0, -1):
-        E = eye + (A @ E) / k
-    for _ in range(squarings):
-        E = E @ E
-    return 0.5 * (E + E.T)
-
-
-def params_from_stiffness(KJ):
-    """Inverse of :func:`stiffness_from_params` (trace is dropped): ``S = log KJ − tr(log KJ)/n I``.
-    ``KJ`` (..., n, n) SPD; returns (..., n(n+1)/2 − 1)."""
-    KJ = np.asarray(as_array("KJ", KJ, tail=(None, None)), dtype=float)
-    check_spd("KJ", KJ)
-    n = KJ.shape[-1]
-    w, V = np.linalg.eigh(KJ)
-    L = (V * np.log(w)[..., None, :]) @ np.swapaxes(V, -1, -2)
-    L = L - np.trace(L, axis1=-2, axis2=-1)[..., None, None] / n * np.eye(n)
-    return np.stack([L[..., i, j] for i, j in _sym_index(n)], -1)
-
-
-def donders_coefficients(params, n: int, trace: float = 4.0):
-    """Coefficients ``c`` (p,) of Donders' law ``N(q)ᵀ(KJ q − b) = 0``: the free entries of ``KJ``
-    (diagonal 0..n−2, then the upper triangle) and ``b = KJ q_rest`` [Nm], from ``params`` (p,)."""
-    n_k = n * (n + 1) // 2 - 1
-    return _donders_coefficients(_params_vector("params", params, n, n_k + n), n, trace)
-
-
-@partial(fast_compile_jit, static_argnums=1)
-def _donders_coefficients(params, n, trace):
-    n_k = n * (n + 1) // 2 - 1
-    KJ = _stiffness_from_params(params[:n_k], n, trace)
-    return jnp.concatenate([jnp.stack([KJ[i, j] for i, j in _sym_index(n)]), KJ @ params[n_k:]])
-
-
-def _labels(chain: Chain):
-    if not isinstance(chain, Chain):
-        raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
-    return _WRIST_JOINTS if isinstance(chain, Wrist) else tuple(str(i) for i in range(chain.n))
-
-
-def coefficient_names(chain: Chain) -> tuple[str, ...]:
-    """Names of :func:`donders_coefficients` (``K[i,j]`` and ``b[i]`` with ``b = KJ q_rest``)."""
-    lab = _labels(chain)
-    return tuple(f"K[{lab[i]},{lab[j]}]" for i, j in _sym_index(chain.n)) + tuple(f"b[{v}]" for v in lab)
-
-
-def parameter_names(chain: Chain) -> tuple[str, ...]:
-    """Names of the fitted parameters: log-stiffness entries ``logK[i,j]`` then ``q_rest[i]``."""
-    lab = _labels(chain)
-    n = chain.n
-    return tuple(f"logK[{lab[i]},{lab[j]}]" for i, j in _sym_index(n)) + tuple(f"q_rest[{v}]" for v in lab)
-
+from .._optimise import covariance, least_squares, spd_size, stiffness_from_params
+from .coefficients import coefficient_names, donders_coefficients, parameter_names
 
 # --- result -------------------------------------------------------------------------------
 
@@ -232,7 +123,10 @@ class DondersFit:
 # --- the fit ------------------------------------------------------------------------------
 
 
-def _residual_fn(chain, n_k, trace, kind, tol):
+def nio_residual(chain, n_k, trace, kind, tol):
+    """The NIO residual ``residual(theta, (x, q_obs, w))`` of one subject (module docstring):
+    ``theta`` = ``n_k`` log-stiffness parameters then ``q_rest``; ``kind`` "torsion" or "joint";
+    ``tol`` the equilibrium Newton tolerance."""
     n = chain.n
 
     def residual(theta, data):
@@ -258,8 +152,11 @@ def _residual_fn(chain, n_k, trace, kind, tol):
 
 
 @partial(fast_compile_jit, static_argnames=("n_k", "trace", "kind", "tol", "max_steps"))
-def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, rcond):
-    residual = _residual_fn(chain, n_k, trace, kind, tol)
+def fit_nio_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, rcond):
+    """The compiled fit behind :func:`fit_donders`: subjects (leading axis) × starts ``theta0``
+    (S, n_starts, p), data ``x`` (S, N, m), ``q_obs`` (S, N, n), weights ``w`` (S, N); a dict of
+    per-subject arrays (best start, standard errors, identifiability in the coefficients)."""
+    residual = nio_residual(chain, n_k, trace, kind, tol)
     n = chain.n
     p = theta0.shape[-1]
 
@@ -312,7 +209,7 @@ def _fit_batch(chain, theta0, x, q_obs, w, *, n_k, trace, kind, tol, max_steps, 
     return jax.vmap(one_subject)(theta0, x, q_obs, w)
 
 
-def _starts(q_mean, n_k, n, n_starts, seed):
+def nio_starts(q_mean, n_k, n, n_starts, seed):
     """Start 0: isotropic KJ, q_rest = mean observed posture; others: random log-stiffness
     (component sd 0.3, i.e. eigenvalue ratios up to ~2) and q_rest offsets (sd 0.1 rad)."""
     rng = np.random.default_rng(seed)
@@ -408,12 +305,12 @@ def fit_donders(
     Np = bucket(N, minimum=64)
     pointing, postures, mask = (pad_rows(a, Np, axis=1, fill="zeros") for a in (pointing, postures, mask))
 
-    n_k = n * (n + 1) // 2 - 1
+    n_k = spd_size(n)
     w = mask.astype(float)
     x = np.where(mask[..., None], pointing, 0.0)
     q_obs = np.where(mask[..., None], postures, 0.0)
     q_mean = (q_obs * w[..., None]).sum(1) / np.maximum(w.sum(1), 1)[:, None]
-    theta0 = _starts(q_mean, n_k, n, int(n_starts), seed)
+    theta0 = nio_starts(q_mean, n_k, n, int(n_starts), seed)
     opts = dict(
         n_k=n_k, trace=float(trace), kind=kind, tol=float(tol), max_steps=int(max_steps), rcond=float(rcond)
     )
@@ -422,7 +319,7 @@ def fit_donders(
         sl = slice(start, min(start + chunk, S))
         # padded subjects repeat the last one; dropped below
         args = [pad_rows(a[sl], chunk) for a in (theta0, x, q_obs, w)]
-        out = jax.device_get(_fit_batch(chain, *args, **opts))
+        out = jax.device_get(fit_nio_batch(chain, *args, **opts))
         out = {k: v[: sl.stop - sl.start] for k, v in out.items()}
         outs.append(out)
         if callback is not None:
@@ -457,19 +354,6 @@ def _to_fit(outs, n_k, chain) -> DondersFit:
         param_names=parameter_names(chain),
         coef_names=coefficient_names(chain),
     )
-
-
-def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
-    """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
-    ``pointing`` (..., P, 2): the first component of the rotation vector of the equilibrium
-    posture (design §3.1, §3.4). Differentiable in ``KJ``, ``q_rest`` and ``pointing``."""
-    if not isinstance(chain, Wrist):
-        raise TypeError(f"`chain` must be a pmpjax.Wrist, got {type(chain).__name__}")
-    q = equilibrium_posture(
-        chain, on_host(jnp.asarray(KJ), lambda a: a[..., None, :, :]),
-        on_host(jnp.asarray(q_rest), lambda a: a[..., None, :]), pointing
-    ).q
-    return on_host(rotvec_from_joint_angles(q), lambda r: r[..., 0])
 
 
 def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: int = 17, **options) -> DondersFit:
