@@ -1,129 +1,59 @@
-"""Benchmark: real reaching (HuG-MP) — the 4-subject λ0-PMP fit in JAX vs a SciPy loop, and the
-held-out error table of every model variant and baseline.
+"""Benchmark: real reaching (HuG-MP) — the 4-subject λ0-PMP trajectory fit in JAX vs a SciPy
+loop, and the held-out table of every model variant against the baselines.
 
-1. **Fit cost** (default mode): ``fitting.fit_reaching([1, 2, 3, 4])`` with the default model
-   (Arimoto planner, ``W = τ0 KJ``, ``τ = τ0 = T/5``; all tasks, repetitions 1–7), one public call.
-   Compile time is the union of the time spans JAX reports through ``jax.monitoring`` for tracing,
-   lowering and XLA compilation during that call; run time is the wall time minus it. Subjects run
-   one after the other inside the compiled call (``lax.map``), so the cost per subject is the run
-   time over the subjects. Against it, on ONE subject in the same process (or, ``--scipy-from``,
-   against a pickled one-subject ``--table`` run): ``scipy.optimize.least_squares`` (2-point
-   Jacobian, ``method="lm"``) around ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6, atol 1e-9) of
-   an independent NumPy λ0-PMP on normalised time (the data README's arm formula, Eqs 3–10 of
-   design §3.1), the same residual (49 time-normalised samples / √49 and the final posture per
-   motion), started from the same stage-1 point. The SciPy loop is capped at ``--scipy-nfev``
-   residual calls and extrapolated as (seconds per call) × (p + 1) × (the JAX fit's stage-2 LM
-   iterations of that subject): a lower bound (no rejected steps, no stage 1). Same computation:
-   the NumPy cost at the start point against JAX's.
-2. **Held-out table** (``--table``): damping variants (``"tau0_KJ"``, ``"full"``, ``"diagonal"``;
-   tied time constants, then the fitted ones with ``--fitted``; ``--variants`` picks) fitted with
-   ``--max-steps`` LM iterations, and the four baselines; held-out repetitions 8–10: median/mean
-   final-posture error and joint-trajectory RMSE [deg] per subject; AIC/BIC per subject; paired
-   Wilcoxon tests of held-out RMSE between variants. Writes ``<name>.json``/``.md`` (and pickles of
-   each fit and prediction) after every variant; ``--merge NAME ...`` combines runs into
-   ``reaching_table.json``/``.md``.
+1. **Fit cost** (default mode): ``fitting.fit_reaching([1, 2, 3, 4])`` with its defaults (Arimoto
+   planner with Eq 10's gain, ``W = τ0 KJ``, ``τ/T`` and ``τ0/T`` fitted per subject; all tasks,
+   repetitions 1–7; stage 1 from the final postures, stage 2 from the trajectories with the solver
+   it picks), one public call. Compile time is the union of the time spans JAX reports through
+   ``jax.monitoring`` for tracing, lowering and XLA compilation during that call; a second call
+   with the same shapes gives the run time alone. Against it, on ONE subject (the one with the
+   fewest motions) in the same process: ``scipy.optimize.least_squares`` (2-point Jacobian,
+   ``method="lm"``) around ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6, atol 1e-9) of an
+   independent NumPy λ0-PMP on normalised time (the data README's arm formula, design §3.1, Eqs
+   3–10), the same residual (49 time-normalised samples / √49 and the final posture per motion).
+   The SciPy loop is capped at ``--scipy-nfev`` residual calls and extrapolated as (seconds per
+   call) × (p + 1) × (the JAX fit's stage-2 LM iterations of that subject): a lower bound (no
+   rejected steps, no stage 1). Same computation: NumPy's cost at the JAX optimum against the JAX
+   fit's data cost.
+2. **Held-out table** (``--table``): every variant of ``fit_reaching`` — planner (``lambda0``,
+   ``lambda0_minjerk``) × damping (``tau0_KJ``, ``diagonal``, ``full``) × time constants (``tied``,
+   ``fitted``), defaults otherwise — and the Donders-only model (stage 1 alone) on the four
+   subjects, predicting the held-out repetitions 8–10 against the baselines: median/mean
+   joint-trajectory RMSE and final-posture error [deg] per subject, fits (status, iterations, AIC,
+   binding bounds), paired Wilcoxon tests of held-out RMSE of every variant against
+   ``pinv_minjerk`` and against the Donders-only model, and a verdict. Writes
+   ``reaching_table.json``/``.md`` (and pickles of each fit and prediction) after every variant,
+   and the pooled summary that ships with ``fitting`` for the main job's report
+   (``fitting/data/reaching_variants.json``).
 
 ``--quick``: one subject, task 1, repetitions 1–2, 3 + 2 LM iterations, 2 SciPy calls; writes
 nothing. Usage: ``python benchmarks/reaching.py [--quick] [--table [--variants ...] [--subjects ...]
-[--max-steps 40 3] [--name NAME]] [--scipy-from NAME] [--merge NAME ...]``.
+[--max-steps 100 100] [--name NAME]]``.
 
-Latest figures (2026-12-01 23:43 – 2026-12-02 00:55 UTC, 2-core AMD EPYC Zen 4 KVM, no GPU, JAX
-0.10.2, nice 5; load average 4.5–10.9 throughout: three other agents and up to three of these runs
-at once, so every time is an upper bound)::
+Latest figures (2026-12-05, 2-core AMD EPYC Zen 4 KVM, no GPU, jax 0.10.2, float64).
 
-    fit_reaching([1, 2, 3, 4]), default model, max_steps (40, 3)   2001 s wall, 219 s compile   load 4.5 -> 9.5
-        stage-2 RK4 steps per sample chosen from the stage-1 parameters: 160 (7840 per movement)
-        1782 s run = 445 s per subject; status NONFINITE (S01), MAX_STEPS (S02-S04)
-    fit_reaching([2]), default model, max_steps (40, 2)            684 s wall, 366 s compile    load 9.9
-        80 RK4 steps per sample; 318 s run
-    fit_reaching([1, 2, 3, 4]), max_steps (40, 0) (Donders-fitted)  179 s wall, 147 s compile   load 10.9
-        predict_reaching (329 held-out motions, 5 predictors)       277 s
-    SciPy loop, S02 (206 motions, p = 12): 64.5 s per residual call (3 calls, load 7.3);
-        cost at the stage-1 point: NumPy 41.7117, JAX 41.7117 (the same computation)
-        extrapolated 64.5 s x 13 x 2 iterations = 1677 s vs JAX 317 s run: 5.3x (2.5x with compile)
+Fit cost (17:15 UTC, idle; defaults: ``max_steps=(100, 100)``, fitted time constants)::
 
-The full default (``max_steps=(40, 25)``) was not affordable here: 3 stage-2 iterations of the
-4-subject fit took 30 min, so the table uses ``(40, 0)`` (Donders-fitted, the paper's procedure)
-for all four subjects and ``(40, 2)`` for the W comparison on S02.
+    | | compile [s] | run [s] | per subject [s] |
+    |---|---:|---:|---:|
+    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 24 | 50 | 12.4 |
+    | fit_reaching, S01 alone (24 stage-2 iterations) | — | 11.0 | 11.0 |
+    | SciPy loop, S01 (1.6 s per residual × 15 × 24 iterations, extrapolated) | — | — | 568 |
 
-Held-out table (``reaching_table.md``, merged runs)::
+    S01: SciPy loop / fit_reaching 52× (target 50×); per subject of the 4-subject call 46×, 30×
+    with compilation. NumPy cost at the JAX optimum 3.9073, JAX 3.9073. Every subject converged;
+    integration error at the optimum ≤ 0.0001°.
 
-    Held-out (repetitions 8–10) final-posture error [deg], median / mean over motions:
-
-    | predictor | S01 | S02 | S03 | S04 | all |
-    |---|---:|---:|---:|---:|---:|
-    | τ0KJ (40,0) | 82.4 / 78.5 (70 NaN) | 3.1 / 3.9 | 3.2 / 3.6 | 4.0 / 5.1 | 3.6 / 5.1 (70 NaN) |
-    | τ0KJ (40,2) | — | 3.1 / 3.9 | — | — | 3.1 / 3.9 |
-    | full (40,2) | — | 5.0 / 5.9 | — | — | 5.0 / 5.9 |
-    | pinv_minjerk | 10.5 / 11.4 | 8.9 / 10.0 | 6.0 / 8.0 | 6.9 / 8.1 | 7.6 / 9.3 |
-    | ik_weights_minjerk | 17.3 / 20.5 | 17.6 / 19.7 | 5.7 / 7.3 | 15.7 / 17.1 | 10.8 / 16.1 |
-    | lambda0_unfitted | 3.4 / 4.8 | 4.9 / 5.6 | 3.4 / 3.8 | 3.8 / 5.4 | 3.8 / 4.9 |
-    | joint_minjerk_oracle | 0.0 / 0.0 | 0.0 / 0.0 | 0.0 / 0.0 | 0.0 / 0.0 | 0.0 / 0.0 |
-
-    Held-out (repetitions 8–10) joint-trajectory RMSE [deg], median / mean over motions:
-
-    | predictor | S01 | S02 | S03 | S04 | all |
-    |---|---:|---:|---:|---:|---:|
-    | τ0KJ (40,0) | 47.4 / 51.4 (70 NaN) | 17.4 / 17.2 | 12.9 / 13.5 | 14.6 / 14.5 | 15.0 / 15.5 (70 NaN) |
-    | τ0KJ (40,2) | — | 17.4 / 17.2 | — | — | 17.4 / 17.2 |
-    | full (40,2) | — | 14.9 / 15.2 | — | — | 14.9 / 15.2 |
-    | pinv_minjerk | 7.9 / 8.9 | 8.3 / 8.9 | 5.3 / 6.4 | 8.5 / 8.8 | 7.5 / 8.3 |
-    | ik_weights_minjerk | 11.6 / 14.5 | 12.4 / 14.6 | 4.8 / 6.1 | 11.6 / 13.2 | 9.9 / 12.1 |
-    | lambda0_unfitted | 13.2 / 14.3 | 13.9 / 14.3 | 13.0 / 13.6 | 14.7 / 14.6 | 13.6 / 14.2 |
-    | joint_minjerk_oracle | 7.1 / 7.1 | 4.8 / 5.5 | 4.9 / 5.5 | 6.2 / 6.2 | 5.6 / 6.0 |
-
-    Held-out motions: S01 73, S02 89, S03 83, S04 84, all 329
-
-    Fits (repetitions 1–7): p, training loss ½Σr²; AIC / BIC; LM iterations (stage 1, 2); status:
-
-    | variant | p | S01 | S02 | S03 | S04 |
-    |---|---:|---|---|---|---|
-    | τ0KJ (40,0) | 12 | 0.559; -3894/-3841; 37,0 | 1.90; -4408/-4351; 40,0; MAX | nan; 0,0; NaN | nan; 0,0; NaN |
-    | τ0KJ (40,2) | 12 | — | 41.71; -255509 / -255406; 40,2; MAX_STEPS | — | — |
-    | full (40,2) | 21 | — | 38.51; -258780 / -258599; 40,2; MAX_STEPS | — | — |
-
-    Free W vs W = τ0 KJ, held-out RMSE, paired Wilcoxon (median diff. [deg], p, share free W better):
-
-    | comparison | S01 | S02 | S03 | S04 | all |
-    |---|---|---|---|---|---|
-    | full (40,2) vs τ0KJ (40,2) | — | -1.47, p=1.2e-13, 96% | — | — | -1.47, p=1.2e-13, 96% |
-
-After these runs (2026-12-02 01:00 UTC, load 2.8) stage 1 leaves out motions whose equilibrium
-fails at its start (they made the start non-finite and stopped LM for the whole subject: the S03 and
-S04 rows above): ``fit_reaching([3, 4], max_steps=(15, 0))`` leaves out one motion each, reaches a
-finite loss (0.65 / 1.00; training RMSE 2.4° / 2.9°; still MAX_STEPS at 15 iterations), and
-predicts held-out final postures to a median 1.9° (S03) and 3.6° (S04), joint RMSE 15.1° / 16.8°.
-
-Idle re-run of the Donders-fitted model, 2026-12-02 09:20 UTC (the main job's reaching part):
-``fit_reaching([1, 2, 3, 4], max_steps=(40, 0))`` 18 s with compilation (12 s of it compiling and
-tracing), ``predict_reaching`` 26–34 s; status SUCCESSFUL (S01), MAX_STEPS (S02–S04); training
-RMSE 2.4 / 3.9 / 2.4 / 2.8°. Held-out mean final-posture error [deg], simulated (motions) and the
-model's Donders prediction (its equilibrium at the target, ``final_error_donders_deg``, all
-motions): S01 78.5 (3 of 73; S01's fitted ``KJ`` has eigenvalues down to 5.6e-4, so Eq 10's gain
-needs ~34 000 RK4 steps per sample and 70 motions are reported SINGULAR) / 2.1; S02 3.9 (89) / 4.0;
-S03 2.4 (83) / 1.8; S04 2.9 (84) / 2.3.
-
-Findings (from these runs):
-
-- **Final postures**: the λ0-PMP (fitted or not) predicts held-out final postures to a median 3–5°,
-  better than the straight minimum-jerk hand path through the pseudo-inverse (6–11°) or through the
-  fitted IK weights (6–18°): the λ0 field's Donders' law holds on the arm to a few degrees.
-- **Trajectories**: its joint-trajectory RMSE (13–17°) is worse than the pseudo-inverse baseline
-  (5–9°); the joint-space oracle that knows the final posture gets 5–7°.
-- **Fitting on real data is fragile**, and these are the numbers of fits that did not converge:
-  stage 1 is NaN at its own start for S03 and S04 (an equilibrium of ``KJ = I`` fails for at least
-  one motion, so LM never moves: their "model" rows are the start point, ``KJ = I`` and ``q_rest``
-  = mean final posture); S01's stage 1 converges to a near-singular ``KJ`` (eigenvalues 0.001–3.6),
-  so 70 of its 73 held-out motions are too stiff for RK4 even at 160 steps per sample (SINGULAR)
-  and its stage 2 is NaN at the start; S02's stage 2 (``W = τ0 KJ``) made no accepted LM step in 2
-  iterations.
-- **W = τ0 KJ against free W** (S02 only, 2 stage-2 iterations from the same start, nested: the
-  full model starts exactly at ``W = KJ``): free W lowers the training loss 41.7 -> 38.5 (ΔAIC =
-  −3271, ΔBIC = −3193 for 9 more parameters) and the held-out RMSE (median paired difference −1.5°,
-  better on 96 % of 89 motions, Wilcoxon p = 1e-13) but worsens the held-out final posture (3.1 ->
-  5.0° median). On this evidence the paper's ``W = τ0 KJ`` is not supported against a free
-  damping for trajectories — with the caveat that neither fit converged and only one subject was
-  compared; the information criteria are optimistic (correlated samples).
+Held-out table (16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12 variants + the
+Donders-only model; ``results/reaching_table.md``): every fit of every variant converged on all
+four subjects. Pooled median held-out RMSE [deg]: Donders-only 15.1; Arimoto planner tied
+(``tau0_KJ``/diagonal/full) 8.9/13.2/8.5, fitted 5.9/7.1/5.6; time-base generator tied 5.6/5.6/5.6,
+fitted 5.3/5.3/5.3; pinv_minjerk 7.5, ik_weights_minjerk 9.9, unfitted λ0-PMP 13.6, joint-space
+oracle 5.6. Verdict: the fitted-time-constant Arimoto variants and every time-base-generator
+variant beat pinv_minjerk (paired Wilcoxon, median −0.6° to −2.0° per motion, p ≤ 0.006); the
+tied Arimoto variants do not (+1.1° to +5.0°). Every variant beats the Donders-only model pooled
+(p ≤ 1e-37) and on every subject (p < 1e-4) except lambda0/diagonal/tied on S03 (−0.6°,
+p = 0.08). Wall per variant 44–344 s (free full damping the slowest).
 """
 
 from __future__ import annotations
@@ -226,14 +156,16 @@ def movement_np(q0, target, KJ, q_rest, tau, tau0, n=50):
 
 
 def residual_np(theta, q_obs, t_ratio, elbow):
-    """The fit's stage-2 residual (``W = τ0 KJ``, ``τ = τ0 = T/5``): per motion
-    ``(q − q_obs)(s_k)/√49``, k = 1..49, then ``(q − q_obs)(1)`` [rad]."""
+    """The fit's stage-2 residual (``W = τ0 KJ``; ``τ = τ0 = T/5`` for 12 parameters, fitted
+    ``log τ/T, log τ0/T`` for 14): per motion ``(q − q_obs)(s_k)/√49``, k = 1..49, then
+    ``(q − q_obs)(1)`` [rad]."""
     KJ = stiffness_np(theta[:9])
     q_rest = np.append(theta[9:12], elbow)
+    a, a0 = (np.exp(theta[12]), np.exp(theta[13])) if len(theta) == 14 else (0.2, 0.2)
     out = []
     for qo, tr in zip(q_obs, t_ratio):
         x_d, _ = arm(qo[-1])
-        q = movement_np(qo[0], x_d, KJ, q_rest, 0.2 * tr, 0.2 * tr, qo.shape[0])
+        q = movement_np(qo[0], x_d, KJ, q_rest, a * tr, a0 * tr, qo.shape[0])
         d = q - qo
         out += [d[1:].ravel() / np.sqrt(qo.shape[0] - 1), d[-1]]
     r = np.concatenate(out)
@@ -470,7 +402,7 @@ def table(args):
 
     # the Donders-only model (final postures, stage 1 only): the reference of every variant
     log("fit donders_only (stage 1 only) ...")
-    don, wall, comp = timed_fit(subjects, **{**kw, "max_steps": (kw.get("max_steps", (40, 100))[0], 0)})
+    don, wall, comp = timed_fit(subjects, **{**kw, "max_steps": (kw.get("max_steps", (100, 100))[0], 0)})
     pred = fitting.predict_reaching(don, reps=(8, 9, 10))
     res["fits"]["donders_only"] = fit_rows(don, wall, comp)
     res["predictors"]["donders_only"] = predictor_rows(pred, "model")
@@ -534,6 +466,14 @@ def fit_cost(args):
     m = R._motions(fit.subjects[k], None, fit.reps, fit.tasks)
     p = len(fit.param_names)
     elbow = m.q_obs[:, -1, 3].mean()
+    # that subject alone (compiled, then timed): the JAX side of the per-subject comparison
+    one = subjects[k] if not args.quick else subjects[0]
+    fitting.fit_reaching([one], **kw)
+    p0 = time.perf_counter()
+    single = fitting.fit_reaching([one], **kw)
+    single_s = time.perf_counter() - p0
+    res["jax"].update(single_subject=fit.subjects[k], single_subject_s=single_s,
+                      single_subject_lm_steps=single.lm_steps[0].tolist())
     log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}), capped at {nfev} residual calls ...")
     calls, costs = [], []
 
@@ -551,7 +491,7 @@ def fit_cost(args):
     except _Cap:
         pass
     per_eval = float(np.median(calls))
-    it = int(fit.lm_steps[k][1])
+    it = int(single.lm_steps[0][1])
     extrap = per_eval * (p + 1) * max(it, 1)
     # the same computation: NumPy's cost at the JAX optimum against the JAX fit's data cost
     per = (R.SAMPLES - 1) * 4 + 4
@@ -565,13 +505,16 @@ def fit_cost(args):
                         jax_data_cost_at_jax_optimum=jax_cost, jax_lm_iterations=it, extrapolated_seconds=extrap,
                         load=load(), integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9",
                         optimiser="least_squares lm, 2-point Jacobian")
-    res["ratios"] = {"stage 2 per subject: SciPy loop / fit_reaching (run)": extrap / (warm / S),
-                     "stage 2 per subject: SciPy loop / fit_reaching (compile included)": extrap / (wall / S)}
-    res["targets"] = {"stage 2 per subject: SciPy loop / fit_reaching (run)": 50.0}
+    res["ratios"] = {f"{m.subject}: SciPy loop / fit_reaching (run)": extrap / single_s,
+                     "4 subjects: SciPy loop (extrapolated per subject) / fit_reaching per subject (run)":
+                         extrap / (warm / S),
+                     "4 subjects, compile included": extrap / (wall / S)}
+    res["targets"] = {f"{m.subject}: SciPy loop / fit_reaching (run)": 50.0}
     res["load_end"] = load()
     print(f"\n| | compile [s] | run [s] | per subject [s] | load |\n|---|---:|---:|---:|---:|\n"
           f"| fit_reaching, {S} subjects ({fit.solver} ×{fit.steps_per_sample}) | {comp:.0f} | {warm:.0f} | "
           f"{warm / S:.1f} | {res['jax']['load']:.1f} |\n"
+          f"| fit_reaching, {m.subject} alone ({it} stage-2 iterations) | — | {single_s:.1f} | {single_s:.1f} | |\n"
           f"| SciPy loop, {m.subject} (extrapolated: {per_eval:.1f} s × {p + 1} × {it} iterations) | — | — | "
           f"{extrap:.0f} | {res['scipy']['load']:.1f} |\n")
     print(f"NumPy cost at the JAX optimum {costs[0]:.6g}, JAX {jax_cost:.6g}")

@@ -371,20 +371,20 @@ def _pointing(ctx) -> dict:
 
 
 #: ``fit_reaching`` options of the reaching part's ``--quick`` run (bundled S02).
-REACHING_QUICK = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 4), time_constants="fitted")
+REACHING_QUICK = dict(reps=(1, 2), tasks=(1,), max_steps=(8, 4))
 
 
 def _reaching(ctx) -> dict:
     """Held-out prediction of the bundled HuG-MP arm movements (repetitions 8–10) by the λ0-PMP
-    fitted per subject to the joint trajectories of repetitions 1–7 (stiffness, rest posture; the
-    final postures through the equilibria first), against every baseline; a table and one figure
-    per subject."""
+    fitted per subject to the joint trajectories of repetitions 1–7 (stiffness, rest posture, time
+    constants; the final postures through the equilibria first), against every baseline; a table
+    and one figure per subject."""
     import json
 
     from .._reaching import fit_reaching, plot_reaching_subject, predict_reaching
 
     # Full: fit_reaching's defaults on all four subjects, every task (trajectories included: RODAS4,
-    # about 2.5 min on two cores); --quick: one subject, task 1, repetitions 1-2, a few iterations.
+    # about 2 min on two cores); --quick: one subject, task 1, repetitions 1-2, a few iterations.
     subjects = (2,) if ctx.quick else (1, 2, 3, 4)
     opts = REACHING_QUICK if ctx.quick else {}
     fit = fit_reaching(subjects, **opts)
@@ -434,10 +434,10 @@ def _reaching(ctx) -> dict:
     }
 
 
-pointing = Part(_pointing, seconds=33, seconds_full=42, order=20)
-donders_nio = Part(_donders_nio, seconds=3, seconds_full=2, follows="pointing", order=10)  # (pointing's NIO shapes)
-ik_figures = Part(_ik_figures, seconds=8, seconds_full=9, order=30)
-ik_synthetic = Part(_ik_synthetic, seconds=8, seconds_full=9, order=40)
-ik_hugmp = Part(_ik_hugmp, seconds=8, seconds_full=66, order=50)
-reaching = Part(_reaching, seconds=40, seconds_full=183, order=60)
-sweeps = Part(_sweeps, seconds=16, seconds_full=27, order=70)
+pointing = Part(_pointing, seconds=29, seconds_full=36, order=20)
+donders_nio = Part(_donders_nio, seconds=2, seconds_full=2, follows="pointing", order=10)  # (pointing's NIO shapes)
+ik_figures = Part(_ik_figures, seconds=7, seconds_full=8, order=30)
+ik_synthetic = Part(_ik_synthetic, seconds=6, seconds_full=8, order=40)
+ik_hugmp = Part(_ik_hugmp, seconds=7, seconds_full=62, order=50)
+reaching = Part(_reaching, seconds=45, seconds_full=106, order=60)
+sweeps = Part(_sweeps, seconds=12, seconds_full=26, order=70)

@@ -211,4 +211,4 @@ def _primitives(ctx) -> dict:
     }
 
 
-primitives = Part(_primitives, seconds=8, seconds_full=7, order=90)
+primitives = Part(_primitives, seconds=6, seconds_full=6, order=90)
