@@ -236,16 +236,14 @@ def _analyze_pointing(args) -> int:
 
     import pmpjax as pj
 
-    from .._donders import fit_donders
     from .._pointing import (
         analyze_pointing,
-        fit_time_constants,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
-        predict_pointing,
     )
+    from .pointing import fit_pointing_models
 
     try:
         rec = pj.read_pointing(args.file, on_invalid="skip" if args.skip_invalid else "raise")
@@ -262,13 +260,7 @@ def _analyze_pointing(args) -> int:
     text = an.table()
     pred, tc = None, None
     if don is not None:
-        fit = fit_donders(pj.Wrist(d=float(don.d)), don.pointing, pj.joint_angles_from_quat(don.quat), mask=don.mask,
-                          n_starts=args.starts)
-        order = [list(don.subjects).index(s) for s in an.subjects]
-        KJ, q_rest = np.asarray(fit.KJ)[order], np.asarray(fit.q_rest)[order]
-        heuristic = predict_pointing(an, KJ, q_rest)
-        tc = fit_time_constants(an, KJ, q_rest)
-        pred = predict_pointing(an, KJ, q_rest, tau0=tc.tau0, tau=tc.tau)
+        fit, order, heuristic, tc, pred = fit_pointing_models(an, don, n_starts=args.starts)
         text += "\n\nτ = τ0 = T/5:\n" + heuristic.table() + "\n\nfitted τ0, τ:\n" + pred.table()
         _write_csv(out / "time_constants.csv", [
             {"subject": s, "donders_status": pj.status_message(int(fit.status[order[i]])),

@@ -285,16 +285,14 @@ def _pointing(ctx) -> dict:
     counts); ``τ0``, ``τ`` fitted by gradient descent through the simulator; Figures 5–8."""
     import pmpjax as pj
 
-    from .._donders import fit_donders
     from .._pointing import (
         analyze_pointing,
-        fit_time_constants,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
-        predict_pointing,
     )
+    from .pointing import fit_pointing_models
 
     # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
     # fitted time constants can be told apart.
@@ -308,12 +306,7 @@ def _pointing(ctx) -> dict:
     rec = pj.read_pointing(ex.files["pointing"])
     don = pj.read_recordings(ex.files["donders"])
     an = analyze_pointing(rec)
-    fit = fit_donders(pj.Wrist(), don.pointing, don.joint_angles, mask=don.mask, n_starts=2, seed=ctx.seed)
-    order = [don.subjects.index(s) for s in an.subjects]
-    KJ, q_rest = fit.KJ[order], fit.q_rest[order]
-    heuristic = predict_pointing(an, KJ, q_rest)
-    tc = fit_time_constants(an, KJ, q_rest)
-    fitted = predict_pointing(an, KJ, q_rest, tau0=tc.tau0, tau=tc.tau)
+    fit, _, heuristic, tc, fitted = fit_pointing_models(an, don, n_starts=2, seed=ctx.seed)
     (ctx.out / "pointing_statistics.txt").write_text(an.table() + "\n\n" + heuristic.table() + "\n")
 
     rows = an.statistics_rows({"T5": heuristic, "fitted": fitted})
