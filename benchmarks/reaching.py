@@ -351,11 +351,17 @@ VARIANTS_TABLE = Path(fitting.__file__).parent / "data" / "reaching_variants.jso
 
 def variant_summary(res) -> dict:
     """Per predictor: pooled held-out RMSE and final error (median, mean), fit status counts and
-    the paired tests against the pseudo-inverse baseline and the Donders-only model."""
+    the paired tests against the pseudo-inverse baseline and the Donders-only model; ``default``
+    marks the variant of ``fit_reaching``'s defaults."""
+    import inspect
+
+    sig = inspect.signature(fitting.fit_reaching).parameters
+    default = "/".join(sig[k].default for k in ("model", "damping", "time_constants"))
     rows = []
     for name, pr in res["predictors"].items():
         fit = res["fits"].get(name)
-        row = dict(predictor=name, rmse_median_deg=pr["all"]["rmse"]["median"], rmse_mean_deg=pr["all"]["rmse"]["mean"],
+        row = dict(predictor=name, default=name == default, rmse_median_deg=pr["all"]["rmse"]["median"],
+                   rmse_mean_deg=pr["all"]["rmse"]["mean"],
                    final_median_deg=pr["all"]["final"]["median"], n=pr["all"]["rmse"]["n"],
                    n_failed=pr["all"]["rmse"]["n_failed"])
         if fit is not None:

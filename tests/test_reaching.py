@@ -501,3 +501,23 @@ def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fi
     assert float(rows["model"]["rmse_deg"]) == pytest.approx(float(np.nanmean(pr.rmse_deg)), rel=1e-5)
     assert float(rows["joint_minjerk_oracle"]["final_error_deg"]) < 1e-9
     assert res["results"]["held_out_motions"] == len(pr.task)
+
+
+def test_the_shipped_variant_table_is_complete_and_marks_the_default():
+    """The held-out table the report shows (fitting/data/reaching_variants.json, written by
+    benchmarks/reaching.py --table) holds every variant and the Donders-only model, each fitted and
+    converged on all four subjects, with exactly one row marked as fit_reaching's defaults."""
+    import inspect
+    import json
+    from pathlib import Path
+
+    table = json.loads((Path(fitting.__file__).parent / "data" / "reaching_variants.json").read_text())
+    rows = {r["predictor"]: r for r in table["rows"]}
+    variants = {f"{m}/{d}/{t}" for m in rmodel.MODELS for d in rmodel.DAMPINGS for t in rmodel.TIME_CONSTANTS}
+    assert variants | {"donders_only"} <= set(rows)
+    assert table["subjects"] == ["S01", "S02", "S03", "S04"]
+    for name in variants | {"donders_only"}:
+        assert rows[name]["converged"] == "4/4" and rows[name]["n_failed"] == 0, name
+    sig = inspect.signature(fitting.fit_reaching).parameters
+    default = "/".join(sig[k].default for k in ("model", "damping", "time_constants"))
+    assert [n for n, r in rows.items() if r.get("default")] == [default]

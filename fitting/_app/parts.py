@@ -407,7 +407,8 @@ def _reaching(ctx) -> dict:
               f"Every λ0-PMP variant (planner × damping × time constants) fitted to the trajectories of all four "
               f"subjects, the Donders-only model and the baselines: pooled held-out RMSE and final-posture error "
               f"[deg], fits converged, paired Wilcoxon tests of held-out RMSE against the pseudo-inverse baseline "
-              f"and the Donders-only model. Measured by {variants['source']} on {variants['date']} "
+              f"and the Donders-only model; 'default' marks fit_reaching's defaults (this run's 'model'). "
+              f"Measured by {variants['source']} on {variants['date']} "
               f"({variants['machine']}), not recomputed by this run. {variants['verdict']}",
               "Not in the papers: the λ0-PMP variants tested against a plain pseudo-inverse on real reaching.")
     mean = {name: float(np.nanmean(b.rmse_deg)) for name, b in pred.predictors().items()}
