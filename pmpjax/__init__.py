@@ -18,6 +18,9 @@ from ._data.hugmp import HugmpSubject as HugmpSubject
 from ._data.hugmp import hugmp_arrays as hugmp_arrays
 from ._data.hugmp import load_hugmp as load_hugmp
 from ._data.hugmp import motion_kinematics as motion_kinematics
+from ._data.joint_angles import JointRecording as JointRecording
+from ._data.joint_angles import read_joint_angles as read_joint_angles
+from ._data.joint_angles import write_joint_angles as write_joint_angles
 from ._data.matlab import ik_dataset_arrays as ik_dataset_arrays
 from ._data.matlab import load_ik_dataset as load_ik_dataset
 from ._data.matlab import read_mat as read_mat
