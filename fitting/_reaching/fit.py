@@ -488,6 +488,13 @@ def fit_reaching(
         skipped[name] += [(int(m.task[i]), int(m.rep[i]), int(m.index[i]),
                            "no equilibrium of the starting model (KJ = I, q_rest = mean final posture): "
                            "left out of the fit") for i in dropped]
+    err = np.asarray(out["integration_error_deg"], float)
+    inaccurate = [name for name, e in zip(usable, err) if e > INTEGRATION_TOL_DEG]
+    if inaccurate:
+        warnings.warn(f"fit_reaching: the integration error at the optimum exceeds {INTEGRATION_TOL_DEG}° for "
+                      f"{', '.join(inaccurate)} ({', '.join(f'{e:.3g}°' for e in err[err > INTEGRATION_TOL_DEG])}) "
+                      f"after refining to {out['steps_per_sample']} steps per sample: pass a larger "
+                      "`steps_per_sample`", stacklevel=2)
     ikw = _ik_weights(mlist)
     return _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, directory, ms)
 

@@ -273,7 +273,8 @@ def _trajectory_residual(theta, data, cfg: _Config, steps: int, solver: str):
                          d[:, -1] * (FINAL_WEIGHT * sw)[:, None]], axis=1)
     used = weight > 0
     r = jnp.where(used[:, None], r, 0.0)  # left-out and padding motions contribute nothing
-    good = ((traj.status == 0) & stable) | ~used
+    # INACCURATE is judged at the optimum (integration_error_deg), not by rejecting LM's trial steps.
+    good = (((traj.status == int(pj.Status.SUCCESSFUL)) | (traj.status == int(pj.Status.INACCURATE))) & stable) | ~used
     return jnp.concatenate([jnp.where(good[:, None], r, jnp.nan).reshape(-1), _bound_residual(theta, data, cfg)])
 
 

@@ -152,8 +152,7 @@ def _errors(q_pred, q_obs, status):
 
 
 def _status_from(traj_status):
-    s = np.asarray(traj_status)
-    return np.where(s == 0, int(Status.SUCCESSFUL), np.where(s == 1, int(Status.NONFINITE), int(Status.SINGULAR)))
+    return np.asarray(traj_status).astype(int)  # pmpjax.Status codes
 
 
 def _simulate_rows(model, planner, q0, target, solver: str, steps: int):

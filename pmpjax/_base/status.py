@@ -24,6 +24,7 @@ class Status(enum.IntEnum):
     INVALID_INPUT = 6
     TOO_FEW_DATA = 7
     NOT_MINIMUM = 8
+    INACCURATE = 9
 
     @property
     def message(self) -> str:
@@ -40,6 +41,8 @@ _MESSAGES = {
     Status.INVALID_INPUT: "input rejected (NaN/inf samples, rank-deficient Jacobians or out of range)",
     Status.TOO_FEW_DATA: "too few valid samples to fit",
     Status.NOT_MINIMUM: "a stationary point that is not a strict local minimum (a saddle or maximum)",
+    Status.INACCURATE: ("the estimated integration error exceeds the tolerance (atol + rtol·max|q|): use a "
+                        "smaller `dt`, solver='rodas4' or adaptive steps (dt=None)"),
 }
 
 

@@ -132,14 +132,15 @@ def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage
     fields of ``simulate`` do), with the exact Jacobian of ``f`` by forward-mode autodiff.
 
     ``observed``/``stage_loop`` as :func:`rk4_step` (the observation is that of the linearisation
-    point ``(t, y)``).
+    point ``(t, y)``); with ``observed=True`` returns ``(y_next, obs, err)``, ``err`` the last stage
+    increment: the difference to the embedded order-3 solution (Hairer & Wanner's ``rodas.f``).
     """
     g = f if observed else (lambda t_, y_, a_: (f(t_, y_, a_), None))
     n = y.shape[0]
     f0, lin, obs = jax.linearize(lambda t_, y_: g(t_, y_, args), t, y, has_aux=True)
     # n Jacobian columns (unit tangents of every trajectory's component j) and ∂f/∂t, in one vmap.
     eye = jnp.eye(n + 1, n, dtype=y.dtype).reshape((n + 1, n) + (1,) * (y.ndim - 1))
-    t_dir = jnp.zeros((n + 1,), jnp.result_type(t)).at[n].set(1.0)
+    t_dir = jnp.zeros((n + 1,) + jnp.shape(t), jnp.result_type(t)).at[n].set(1.0)
     cols = jax.vmap(lin)(t_dir, jnp.broadcast_to(eye, (n + 1,) + y.shape))
     ft = cols[n]
     inv_gh = 1.0 / (tableau.gamma * h)
@@ -150,14 +151,16 @@ def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage
         U = _rosenbrock_stages_loop(g, t, y, h, args, f0, ft, solve, tableau)
     else:
         U = []
+        hy = _state_step(h)
         for i in range(s):
             fi = f0 if i == 0 else g(t + tableau.alpha[i] * h, y + sum(a * u for a, u in zip(tableau.a[i], U)), args)[0]
-            rhs = fi + tableau.d[i] * h * ft
+            rhs = fi + tableau.d[i] * hy * ft
             for cij, u in zip(tableau.c[i], U):
-                rhs = rhs + (cij / h) * u
+                rhs = rhs + (cij / hy) * u
             U.append(solve(rhs))
     y_next = y + sum(mi * u for mi, u in zip(tableau.m, U))
-    return (y_next, obs) if observed else y_next
+    # Stiffly accurate: the embedded solution is the last stage's argument, so U_s is its error.
+    return (y_next, obs, U[-1]) if observed else y_next
 
 
 def _rosenbrock_stages_loop(g, t, y, h, args, f0, ft, solve, tableau):
@@ -167,11 +170,12 @@ def _rosenbrock_stages_loop(g, t, y, h, args, f0, ft, solve, tableau):
     lower = lambda rows: jnp.array([list(r) + [0.0] * (s - len(r)) for r in rows], dt)  # noqa: E731
     A, C = lower(tableau.a), lower(tableau.c)
     alpha, d = jnp.array(tableau.alpha, dt), jnp.array(tableau.d, dt)
-    U0 = jnp.zeros((s,) + y.shape, dt).at[0].set(solve(f0 + tableau.d[0] * h * ft))
+    hy = _state_step(h)
+    U0 = jnp.zeros((s,) + y.shape, dt).at[0].set(solve(f0 + tableau.d[0] * hy * ft))
 
     def stage(i, U):
         yi = y + jnp.tensordot(A[i], U, axes=1)
-        rhs = g(t + alpha[i] * h, yi, args)[0] + jnp.tensordot(C[i], U, axes=1) / h + d[i] * h * ft
+        rhs = g(t + alpha[i] * h, yi, args)[0] + jnp.tensordot(C[i], U, axes=1) / hy + d[i] * hy * ft
         return U.at[i].set(solve(rhs))
 
     U = lax.fori_loop(1, s, stage, U0)
@@ -210,56 +214,234 @@ def integrate(
     return lax.scan(segment, y0, (t0s, hs))
 
 
+def rk4_fsal_step(g: Callable, t, y, h, args, k1, *, stage_loop: bool = False):
+    """One classical RK4 step of a component-leading array ``y`` whose first stage ``k1 = f(t, y)``
+    is given, with an embedded third-order error estimate at no extra field evaluation.
+
+    ``g(t, y, args) -> (ẏ, obs)``. The fifth evaluation ``(k5, obs5) = g(t + h, y_next)`` is the
+    next step's first stage (first same as last). With it, ``ŷ = y + h (k1 + 2 k2 + 2 k3 + k5)/6``
+    is of order three (weights (1/6, 1/3, 1/3, 0, 1/6) satisfy the four order-3 conditions), so
+    ``err = y_next − ŷ = h (k4 − k5)/6`` estimates the local error of the lower-order solution
+    (a bound, O(h⁴), on the order-4 step's O(h⁵) error).
+    **Returns:** ``(y_next, k5, obs5, err)``.
+    """
+    if stage_loop:
+        return _fsal_stages_loop(g, t, y, h, args, k1)
+    hy = _state_step(h)
+    k2 = g(t + 0.5 * h, y + (0.5 * hy) * k1, args)[0]
+    k3 = g(t + 0.5 * h, y + (0.5 * hy) * k2, args)[0]
+    k4 = g(t + h, y + hy * k3, args)[0]
+    y_next = y + (hy / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+    k5, obs5 = g(t + h, y_next, args)
+    return y_next, k5, obs5, (hy / 6.0) * (k4 - k5)
+
+
+def _state_step(h):
+    """A step size that multiplies component-leading states: scalar, or a per-trajectory (...)
+    array lifted to (1, ...) (adaptive steps)."""
+    return h if jnp.ndim(h) == 0 else h[None]
+
+
+#: Stages 2–5 of :func:`rk4_fsal_step` as rows over ``(k1, k2, k3, k4)``, and their times.
+_FSAL_A = ((0.5, 0.0, 0.0, 0.0), (0.0, 0.5, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6))
+_FSAL_C = (0.5, 0.5, 1.0, 1.0)
+
+
+def _fsal_stages_loop(g, t, y, h, args, k1):
+    """:func:`rk4_fsal_step` with stages 2–5 in a ``fori_loop`` (``g`` traced once)."""
+    dt = y.dtype
+    A, c = jnp.array(_FSAL_A, dt), jnp.array(_FSAL_C, dt)
+    obs0 = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(g, t, y, args)[1])
+    ks0 = jnp.zeros((5,) + y.shape, dt).at[0].set(k1)
+
+    hy = _state_step(h)
+
+    def stage(i, carry):
+        ks, _, obs = carry
+        yi = y + hy * jnp.tensordot(A[i], ks[:4], axes=1)
+        k, o = g(t + c[i] * h, yi, args)
+        return ks.at[i + 1].set(k), yi, o
+
+    ks, y_next, obs5 = lax.fori_loop(0, 4, stage, (ks0, y, obs0))
+    return y_next, ks[4], obs5, (hy / 6.0) * (ks[3] - ks[4])
+
+
+def _error_norm(e):
+    """Largest component of a component-leading local error ``e`` (n, ...) -> (...)."""
+    return jnp.max(jnp.abs(e), axis=0)
+
+
 def integrate_observed(
     f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, acc: Any, write: Callable | None, *,
     block: int = 1, unroll: int = 1, stage_loop: bool = False, solver: str = "rk4",
 ):
-    """Integrate ``ẏ = f(t, y, args)[0]`` over consecutive segments, observing their starts.
+    """Integrate ``ẏ = f(t, y, args)[0]`` over consecutive segments, observing their starts, and
+    accumulate the solver's embedded local error estimates.
 
-    **Arguments:** ``f(t, y, args) -> (ẏ, obs)``; ``t0s`` (S,) segment start times, ``hs`` (S,)
-    step sizes or one Python float for all (a compile-time constant: XLA fuses a step size read
-    per segment into every elementwise loop, measured 2× slower with one step per segment),
-    ``n_steps`` static steps per segment; ``write(acc, i, obs) -> acc`` receives the
-    observations of the starts of segments ``i, ..., i + block − 1`` stacked on a leading
-    ``(block,)`` axis (``block`` divides S); ``write=None`` observes nothing. With ``n_steps == 1``
-    an observation is the step's first stage (free), otherwise one extra evaluation per segment.
-    ``solver``: one of :data:`SOLVERS`.
-    **Returns:** ``(y_final, acc)``.
+    **Arguments:** ``f(t, y, args) -> (ẏ, obs)`` for a component-leading array ``y0`` (n, ...);
+    ``t0s`` (S,) segment start times, ``hs`` (S,) step sizes or one Python float for all (a
+    compile-time constant: XLA fuses a step size read per segment into every elementwise loop,
+    measured 2× slower with one step per segment), ``n_steps`` static steps per segment;
+    ``write(acc, i, obs) -> acc`` receives the observations of the starts of segments
+    ``i, ..., i + block − 1`` stacked on a leading ``(block,)`` axis (``block`` divides S);
+    ``write=None`` observes nothing. ``solver``: one of :data:`SOLVERS`.
+
+    RK4 carries its first stage from step to step (:func:`rk4_fsal_step`): the observations of
+    segment starts and of the end come free. RODAS4 observes its linearisation point: free with
+    ``n_steps == 1``, otherwise one extra evaluation per segment, and one at the end.
+
+    **Returns:** ``(y_final, acc, error, obs_end)``: ``error`` (...) the sum over steps of the
+    largest component of the embedded local error estimate (RK4: :func:`rk4_fsal_step`; RODAS4:
+    the last stage increment, Hairer & Wanner's ``rodas.f``), ``obs_end`` the observation of the
+    final state.
 
     Keep ``write`` linear in ``obs`` (e.g. ``dynamic_update_slice`` into a buffer in ``acc``) so
     that reverse mode stores no per-segment copy of ``acc``.
     """
-    # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
-    one_step = step_function(solver)
-    step = jax.checkpoint(lambda t, y, h: one_step(f, t, y, h, args, observed=True, stage_loop=stage_loop))
-    observe = jax.checkpoint(lambda t, y: f(t, y, args)[1])
-
-    def run_steps(y, t0, h):
-        def body(y, i):
-            return step(t0 + i * h, y, h)[0], None
-
-        return lax.scan(body, y, jnp.arange(n_steps, dtype=jnp.result_type(float)), unroll=unroll)[0]
-
     t0s = jnp.asarray(t0s)
     S = t0s.shape[0]
     uniform = isinstance(hs, float)
     segs = (t0s,) if uniform else (t0s, jnp.asarray(hs))
     seg_h = (lambda s: (s[0], hs)) if uniform else (lambda s: s)  # noqa: E731
+    rk4 = solver == "rk4"
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}")
+
+    # Rematerialised: reverse mode stores one state per step, not every stage's intermediates.
+    if rk4:
+        @jax.checkpoint
+        def step(t, c, h):
+            y, (k1, obs), err = c
+            y_next, k5, obs5, e = rk4_fsal_step(f, t, y, h, args, k1, stage_loop=stage_loop)
+            return (y_next, (k5, obs5), err + lax.stop_gradient(_error_norm(e))), obs
+    else:
+        @jax.checkpoint
+        def step(t, c, h):
+            y, _, err = c
+            y_next, obs, e = rosenbrock_step(f, t, y, h, args, observed=True, stage_loop=stage_loop)
+            return (y_next, None, err + lax.stop_gradient(_error_norm(e))), obs
+
+    observe = jax.checkpoint(lambda t, y: f(t, y, args)[1])
+
+    def run_steps(c, t0, h):
+        def body(c, i):
+            return step(t0 + i * h, c, h)[0], None
+
+        return lax.scan(body, c, jnp.arange(n_steps, dtype=jnp.result_type(float)), unroll=unroll)[0]
+
+    err0 = jnp.zeros(y0.shape[1:], y0.dtype)
+    c0 = (y0, f(t0s[0], y0, args) if rk4 else None, err0)
+
+    def end(c):
+        y, fsal, err = c
+        if rk4:
+            return y, err, fsal[1]
+        t_end = t0s[-1] + n_steps * (hs if uniform else jnp.asarray(hs)[-1])
+        return y, err, observe(t_end, y)
+
     if write is None:
-        return lax.scan(lambda y, s: (run_steps(y, *seg_h(s)), None), y0, segs)[0], acc
+        c = lax.scan(lambda c, s: (run_steps(c, *seg_h(s)), None), c0, segs)[0]
+        y, err, obs_end = end(c)
+        return y, acc, err, obs_end
     if S % block:
         raise ValueError(f"block={block} must divide the number of segments {S}")
 
-    def segment(y, s):
+    def segment(c, s):
         t0, h = seg_h(s)
         if n_steps == 1:
-            return step(t0, y, h)
-        return run_steps(y, t0, h), observe(t0, y)
+            return step(t0, c, h)
+        obs = c[1][1] if rk4 else observe(t0, c[0])
+        return run_steps(c, t0, h), obs
 
     def blk(carry, s):
-        y, a = carry
-        (y, obs) = lax.scan(segment, y, s[1:])
-        return (y, write(a, s[0][0], obs)), None
+        c, a = carry
+        (c, obs) = lax.scan(segment, c, s[1:])
+        return (c, write(a, s[0][0], obs)), None
 
     blocks = tuple(v.reshape(S // block, block) for v in (jnp.arange(S),) + segs)
-    return lax.scan(blk, (y0, acc), blocks)[0]
+    c, acc = lax.scan(blk, (c0, acc), blocks)[0]
+    y, err, obs_end = end(c)
+    return y, acc, err, obs_end
+
+
+#: PI step-size controller (Hairer & Wanner II, IV.2; Gustafsson): ``h_new = h · safety ·
+#: r^(−0.7/k) · r_prev^(0.4/k)`` for the error-per-unit-step ratio ``r`` ∝ h³ of both pairs (k = 3),
+#: each factor clipped to [FACTOR_MIN, FACTOR_MAX] (at most 1 after a rejected step).
+SAFETY, FACTOR_MIN, FACTOR_MAX = 0.9, 0.2, 10.0
+_BETA1, _BETA2 = 0.7 / 3, 0.4 / 3
+
+
+def integrate_adaptive(
+    f: Callable, y0, ts, include_initial: bool, args: Any, acc: Any, write: Callable, *, solver: str,
+    rtol: float, atol: float, max_steps: int, span: float, h0: float,
+):
+    """Integrate ``ẏ = f(t, y, args)[0]`` from ``t = 0`` with adaptive steps, each trajectory of the
+    component-leading ``y0`` (n, B) with its own step size, landing on every save time.
+
+    A step is accepted when its embedded local error estimate ``e`` (:func:`rk4_fsal_step`, or
+    RODAS4's last stage) meets ``max_i |e_i| / (atol + rtol · max(|y_i|, |y_next_i|)) ≤ h / span``
+    (error per unit step: the accepted estimates then sum to at most the tolerance over ``span``);
+    step sizes follow a PI controller and are not differentiated (forward-mode derivatives are
+    those of the accepted discrete steps). The batch moves in lockstep: a ``while_loop`` runs until
+    every trajectory has recorded every save time or ``max_steps`` iterations have run.
+
+    **Arguments:** ``ts`` (S,) increasing save times (a tuple; the integration ends at ``ts[-1]``);
+    ``include_initial``: ``ts[0] == 0`` is recorded; ``write(acc, j, obs, mask) -> acc`` records
+    the observation ``obs`` (*comp, B) of save time ``j`` (B,) where ``mask`` (B,).
+    **Returns:** ``(y_final, acc, error (B,), steps (B,), done (B,))``: ``error`` the sum of the
+    accepted steps' estimates [units of y], ``steps`` the steps tried, ``done`` every save time
+    recorded (otherwise ``max_steps`` ran out).
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}")
+    rk4 = solver == "rk4"
+    dt = y0.dtype
+    B = y0.shape[1:]
+    S = len(ts)
+    ts_arr = jnp.asarray(ts, dt)
+    t = jnp.zeros(B, dt)
+    fsal = f(t, y0, args) if rk4 else None
+    h = jnp.full(B, min(h0, ts[0] if ts[0] > 0 else (ts[1] if S > 1 else h0)), dt)
+    carry = dict(t=t, y=y0, fsal=fsal, h=h, j=jnp.zeros(B, jnp.int32), pending=jnp.full(B, bool(include_initial)),
+                 err=jnp.zeros(B, dt), r_prev=jnp.ones(B, dt), steps=jnp.zeros(B, jnp.int32), it=0, acc=acc)
+
+    def cond(c):
+        return jnp.any(c["j"] < S) & (c["it"] < max_steps)
+
+    def body(c):
+        t, y, h, j, pending = c["t"], c["y"], c["h"], c["j"], c["pending"]
+        j_eff = j + pending.astype(j.dtype)
+        active = j_eff < S
+        target = ts_arr[jnp.minimum(j_eff, S - 1)]
+        gap = target - t
+        clipped = h >= gap
+        h_eff = lax.stop_gradient(jnp.where(active, jnp.where(clipped, gap, h), h))
+        if rk4:
+            k1, obs = c["fsal"]
+            y_next, k5, obs5, e = rk4_fsal_step(f, t, y, h_eff, args, k1)
+        else:
+            y_next, obs, e = rosenbrock_step(f, t, y, h_eff, args, observed=True)
+        acc = write(c["acc"], j, obs, pending)
+        scale = atol + rtol * jnp.maximum(jnp.abs(y), jnp.abs(y_next))
+        ratio = lax.stop_gradient(jnp.max(jnp.abs(e) / scale, axis=0) * (span / h_eff))
+        ok = jnp.isfinite(ratio) & jnp.all(jnp.isfinite(y_next), axis=0)
+        accept = active & ok & (ratio <= 1.0)
+        t_next = jnp.where(accept, jnp.where(clipped, target, t + h_eff), t)
+        y = jnp.where(accept[None], y_next, y)
+        if rk4:
+            fsal = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old), (k5, obs5), c["fsal"])
+        else:
+            fsal = c["fsal"]
+        r = jnp.where(ok, jnp.maximum(ratio, 1e-10), 1.0)
+        factor = SAFETY * r ** (-_BETA1) * c["r_prev"] ** _BETA2
+        factor = jnp.clip(jnp.where(ok, factor, FACTOR_MIN), FACTOR_MIN, jnp.where(accept, FACTOR_MAX, 1.0))
+        h_new = h_eff * factor
+        h_new = jnp.where(accept & clipped, jnp.maximum(h, h_new), h_new)
+        return dict(t=t_next, y=y, fsal=fsal, h=lax.stop_gradient(jnp.where(active, h_new, h)),
+                    j=j + pending.astype(j.dtype), pending=accept & clipped,
+                    err=c["err"] + jnp.where(accept, lax.stop_gradient(_error_norm(e)), 0.0),
+                    r_prev=jnp.where(accept, r, c["r_prev"]), steps=c["steps"] + active.astype(jnp.int32),
+                    it=c["it"] + 1, acc=acc)
+
+    c = lax.while_loop(cond, body, carry)
+    return c["y"], c["acc"], c["err"], c["steps"], c["j"] >= S

@@ -22,12 +22,21 @@ from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
 from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax, warn_without_x64
 from .._chains.kinematics import manipulability_soa
-from .integrate import SOLVERS, integrate_observed
+from .integrate import SOLVERS, integrate_adaptive, integrate_observed
 from .models import _PMP
 from .planners import Planner
 from .redundancy import admittance_terms_soa
 
 OK, NONFINITE, SINGULAR = Status.SUCCESSFUL, Status.NONFINITE, Status.SINGULAR
+INACCURATE, INVALID_INPUT, MAX_STEPS = Status.INACCURATE, Status.INVALID_INPUT, Status.MAX_STEPS
+
+#: Default tolerances of ``simulate``'s error estimate: a trajectory is ``INACCURATE`` when its
+#: accumulated error estimate exceeds ``ATOL + RTOL·max|q|`` [rad] (at most 0.046° for joint
+#: angles within ±π, below the 0.05° that the tests hold every successful trajectory to).
+RTOL = 1e-4
+ATOL = 5e-4
+#: Default ``max_steps`` of adaptive steps (``dt=None``): steps tried per movement.
+MAX_ADAPTIVE_STEPS = 4096
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,9 +66,21 @@ class SaveAt:
 class Trajectory:
     """Saved states. ``t`` (S,) [s] from the start of each movement; ``q`` (..., S, n) [rad];
     ``x`` (..., S, m); ``qdot`` (..., S, n); ``xdot`` (..., S, m); ``manipulability`` (..., S)
-    (``sqrt(det J Jᵀ)``); ``status`` (...,) int, a :class:`pmpjax.Status` code: ``SUCCESSFUL``,
-    ``NONFINITE``, or ``SINGULAR`` (passed within ``singular_tol`` of a rank-deficient
-    Jacobian). Sequences add an (M,) axis before S.
+    (``sqrt(det J Jᵀ)``). Sequences add an (M,) axis before S.
+
+    ``error_estimate`` (...,) [rad]: the sum over all steps (of every movement of a sequence) of
+    the largest joint component of the solver's embedded local error estimate (RK4: a third-order
+    companion, :func:`~pmpjax._pmp.integrate.rk4_fsal_step`; RODAS4: its last stage). It bounds
+    the error of the embedded lower-order solution, so it is conservative for the reported
+    fourth-order one: 20–1 600× the true error on accurate runs, and about the true error when a
+    step is far too coarse (``benchmarks/accuracy.py``).
+
+    ``status`` (...,) int, a :class:`pmpjax.Status` code, by precedence: ``INVALID_INPUT``
+    (traced inputs that fail the checks an eager call raises on), ``MAX_STEPS`` (adaptive steps
+    ran out), ``NONFINITE``, ``INACCURATE`` (``error_estimate > atol + rtol·max|q|``, ``max|q|``
+    the largest joint angle of the start and the saved samples), ``SINGULAR`` (passed within
+    ``singular_tol`` of a rank-deficient Jacobian) or ``SUCCESSFUL``: finite, non-singular and
+    within tolerance.
     """
 
     t: jax.Array
@@ -69,6 +90,7 @@ class Trajectory:
     xdot: jax.Array
     manipulability: jax.Array
     status: jax.Array
+    error_estimate: jax.Array
 
     @property
     def speed(self):
@@ -156,8 +178,10 @@ def _rates(model, q0, *, batch):
 
 
 def check_rk4_stability(model, planner, q0, batch, h):
-    """RK4 is stable for real negative rates |λ h| < 2.78; estimate the fastest rate at q0
-    (``h=None``: only check that ``q0`` is not singular, for the L-stable solver).
+    """Refuse at once a ``dt`` far outside RK4's stability region (real negative rates need
+    |λ h| < 2.78) at the start posture ``q0`` (``h=None``: only check that ``q0`` is not singular).
+    The rates along the path can grow beyond those at ``q0``: the trajectory's error estimate
+    (``INACCURATE``) catches what this start check cannot.
 
     Concrete ``model``, ``q0`` inside a caller's ``jit``/``vmap``/``grad`` are evaluated eagerly
     (outside any trace no ``ensure_compile_time_eval``: it would compile each constant op apart)."""
@@ -181,7 +205,8 @@ def check_rk4_stability(model, planner, q0, batch, h):
     if rate * h > 2.5:
         raise ValueError(
             f"`dt`={h:.3g} s is too large for RK4: the fastest time constant at q0 is "
-            f"{1 / rate:.3g} s (need dt < {2.5 / rate:.3g} s, or solver='rodas4', which is stable at any dt)"
+            f"{1 / rate:.3g} s (need dt < {2.5 / rate:.3g} s; or solver='rodas4', L-stable, whose step is "
+            "limited by accuracy alone, or adaptive steps with dt=None)"
         )
 
 
@@ -196,6 +221,9 @@ def simulate_sequence(
     saveat: SaveAt | None = None,
     singular_tol: float = 1e-4,
     solver: str = "rk4",
+    rtol: float = RTOL,
+    atol: float = ATOL,
+    max_steps: int = MAX_ADAPTIVE_STEPS,
 ) -> Trajectory:
     """Simulate consecutive movements to ``targets`` (..., M, m), each lasting ``duration`` [s].
 
@@ -205,18 +233,32 @@ def simulate_sequence(
     Returns a :class:`Trajectory` with leaves (..., M, S, ·). Differentiable with respect to every
     array leaf and to ``q0``/``targets``; ``duration``, ``dt``, ``saveat`` and ``solver`` are static.
 
-    ``solver``: ``"rk4"`` (classical RK4; refuses a ``dt`` outside its stability region) or
-    ``"rodas4"`` (L-stable Rosenbrock, order 4: for stiff movements, e.g. Eq 10's gain with
-    anisotropic ``KJ``, where it takes steps 10–100× larger than RK4 could; each step costs about
-    two RK4 steps). See ``pmpjax._pmp.integrate`` and ``benchmarks/stiff.py``. Stiff modes that
-    are already excited at ``t = 0`` (``q0`` far from its null-space equilibrium under light
-    damping) are damped at any ``dt`` but resolved only by a ``dt`` below their time constant.
+    ``solver``: ``"rk4"`` (classical RK4; refuses a ``dt`` far outside its stability region at
+    ``q0``) or ``"rodas4"`` (L-stable Rosenbrock, order 4: for stiff movements, e.g. Eq 10's gain
+    with anisotropic ``KJ``, where it takes steps 10–100× larger than RK4 could; each step costs
+    about two RK4 steps). See ``pmpjax._pmp.integrate`` and ``benchmarks/stiff.py``. Stability is
+    not accuracy: a step too coarse for the nonlinear field gives a wrong answer with either
+    solver, which the error estimate reports (``INACCURATE``).
+
+    ``dt`` [s]: the fixed step (default 1 ms; each save interval gets equal steps of at most
+    ``dt``), or ``None`` for adaptive steps: each trajectory's step is set by a PI controller so
+    that its local error estimates sum to at most ``atol + rtol·|q|`` over the movement, landing on
+    every save time; ``max_steps`` (default 4 096) steps tried per movement, else ``MAX_STEPS``.
+    Adaptive runs save at ``saveat.ts``, at the end (``final``) or by default at 101 equally
+    spaced times; they support forward-mode derivatives (``jax.jvp``, ``jax.jacfwd``) but not
+    ``jax.grad`` (a ``while_loop``). Fixed steps are the default: on the benchmark's workloads
+    they are as accurate at a lower cost (``benchmarks/accuracy.py``).
+
+    ``rtol``, ``atol`` [rad]: tolerances of the error estimate (defaults ``1e-4`` and ``5e-4``: at
+    most 0.046° for joint angles within ±π). Inside a caller's ``jit``/``vmap`` the input checks
+    that an eager call raises on become per-item ``INVALID_INPUT`` statuses.
 
     Saved samples come from the step's first stage (no extra field evaluations when saving every
     step) and are written in place in the output layout, so saving costs about the memory it fills
     (``benchmarks/simulate.py --saves``).
     """
-    return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False, solver)
+    return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False, solver, rtol, atol,
+                     max_steps)
 
 
 def check_solver(solver) -> str:
@@ -226,12 +268,14 @@ def check_solver(solver) -> str:
     return solver
 
 
-def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, single, solver):
+def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, single, solver, rtol, atol,
+              max_steps):
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     if not isinstance(planner, Planner):
         raise TypeError(f"`planner` must be a pmpjax Planner, got {type(planner).__name__}")
     solver = check_solver(solver)
+    rtol, atol = _tolerance("rtol", rtol), _tolerance("atol", atol)
     warn_without_x64()
     chain = model.chain
     n, m = chain.n, chain.m
@@ -239,12 +283,16 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     targets = to_jax(as_array("targets", targets, tail=(None, m)), float)
     chain.check_target("targets", targets)
     duration = positive_float("duration", duration)
-    dt = positive_float("dt", dt)
     saveat = saveat or SaveAt()
     batch = tuple(
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
     )
-    _check_output_size(saveat, duration, dt, math.prod(batch) * targets.shape[-2], 2 * (n + m) + 1)
+    concrete = is_concrete(model, planner, q0, targets)
+    if dt is None:
+        return _simulate_adaptive(model, planner, q0, targets, duration, saveat, singular_tol, single, solver,
+                                  rtol, atol, check_positive_int("max_steps", max_steps), batch, concrete)
+    dt = positive_float("dt", dt)
+    _check_output_size(saveat, duration, dt, math.prod(batch) * targets.shape[-2], 2 * (n + m) + 2)
     sched = _schedule(saveat, duration, dt)
     if is_concrete(model, planner, q0):
         check_rk4_stability(model, planner, q0, batch, max(sched.hs) if solver == "rk4" else None)
@@ -253,7 +301,93 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     kernel = _kernel(h=h, batch=batch, n_steps=sched.n_steps, include_initial=sched.include_initial,
                      singular_tol=float(singular_tol), single=single, solver=solver)
     out = kernel(model, planner, q0, targets, np.asarray(sched.t0s), np.asarray(sched.hs))
-    return replace(out, t=to_jax(np.asarray(sched.t)))
+    valid = None if concrete else _valid_items(model, planner, q0, targets, batch)
+    return replace(out, t=to_jax(np.asarray(sched.t)),
+                   status=_judge(out.status, out.error_estimate, out.q, q0, batch, rtol, atol, valid))
+
+
+#: Samples saved by ``SaveAt()`` with adaptive steps (``dt=None``): equally spaced, ``t = 0`` included.
+ADAPTIVE_SAMPLES = 101
+
+
+def _simulate_adaptive(model, planner, q0, targets, duration, saveat, singular_tol, single, solver, rtol, atol,
+                       max_steps, batch, concrete):
+    if saveat.every is not None:
+        raise ValueError("`saveat.every` counts fixed steps: with adaptive steps (dt=None) save at "
+                         "`SaveAt(ts=...)`, `SaveAt(final=True)` or the default (101 equally spaced samples)")
+    if saveat.final:
+        ts = (duration,)
+    elif saveat.ts is not None:
+        ts = saveat.ts
+        if ts[-1] > duration * (1 + 1e-12):
+            raise ValueError(f"`saveat.ts` goes beyond `duration`={duration}")
+    else:
+        ts = tuple(float(v) for v in np.linspace(0.0, duration, ADAPTIVE_SAMPLES))
+    if len(ts) == 1 and ts[0] == 0.0:
+        raise ValueError("`saveat.ts` must reach beyond t = 0")
+    n, m = model.chain.n, model.chain.m
+    size = float(math.prod(batch) * targets.shape[-2]) * len(ts) * (2 * (n + m) + 2) * 8
+    if size > 0.8 * _available_memory():
+        raise ValueError(f"the saved trajectory would take {size / 2**30:.3g} GiB: save fewer samples or "
+                         "simulate fewer movements at a time")
+    if is_concrete(model, planner, q0):
+        check_rk4_stability(model, planner, q0, batch, None)
+    out = _run_adaptive(model, planner, q0, targets, batch=batch, ts=ts, include_initial=ts[0] == 0.0,
+                        singular_tol=float(singular_tol), single=single, solver=solver, rtol=rtol, atol=atol,
+                        max_steps=max_steps)
+    valid = None if concrete else _valid_items(model, planner, q0, targets, batch)
+    return replace(out, t=to_jax(np.asarray(ts)),
+                   status=_judge(out.status, out.error_estimate, out.q, q0, batch, rtol, atol, valid))
+
+
+def _tolerance(name, v) -> float:
+    """A concrete, non-negative, finite tolerance as ``float`` (``ValueError`` naming ``name``)."""
+    if not is_concrete(v):
+        raise ValueError(f"`{name}` must be a concrete number (it is traced)")
+    a = np.asarray(v, dtype=float)
+    if a.ndim or not np.isfinite(a) or a < 0:
+        raise ValueError(f"`{name}` must be a finite, non-negative number; got {v!r}")
+    return float(a)
+
+
+def _judge(status, error, q, q0, batch, rtol, atol, valid):
+    """``status`` with ``INACCURATE`` where the error estimate exceeds ``atol + rtol·max|q|`` (the
+    largest joint angle of the start and the saved samples), and ``INVALID_INPUT`` where ``valid``
+    (traced inputs, checked in the trace) is False."""
+    if valid is None and is_concrete(status, error, q, q0):
+        xp, status, error = np, np.asarray(status), np.asarray(error)
+        q, q0 = np.asarray(q), np.asarray(q0)
+    else:
+        xp = jnp
+    scale = xp.maximum(xp.max(xp.abs(q.reshape(batch + (-1,))), axis=-1),
+                       xp.max(xp.abs(xp.broadcast_to(q0, batch + q0.shape[-1:])), axis=-1))
+    inaccurate = ((status == int(OK)) | (status == int(SINGULAR))) & ~(error <= atol + rtol * scale)
+    status = xp.where(inaccurate, int(INACCURATE), status)
+    if valid is not None:
+        status = xp.where(valid, status, int(INVALID_INPUT))
+    return to_jax(status) if xp is np else status
+
+
+def _valid_items(model, planner, q0, targets, batch):
+    """Traced per-item checks (a caller's ``jit``/``vmap``, where the eager ones cannot run): finite
+    ``q0``, ``targets``, ``q_rest``; symmetric positive definite ``W`` and ``KJ``; finite, positive
+    planner parameters. Returns a (*batch) bool array."""
+    ok = jnp.ones(batch, bool)
+    fin = lambda a, core: jnp.all(jnp.isfinite(a), axis=tuple(range(-core, 0))) if core else jnp.isfinite(a)  # noqa: E731
+    ok &= jnp.broadcast_to(fin(q0, 1), batch) & jnp.broadcast_to(fin(targets, 2), batch)
+    for name in ("W", "KJ"):
+        M = getattr(model, name)
+        if M is None:
+            continue
+        sym = jnp.max(jnp.abs(M - jnp.swapaxes(M, -1, -2)), axis=(-2, -1)) <= 1e-8 * jnp.max(jnp.abs(M), axis=(-2, -1))
+        pd = jnp.linalg.eigvalsh(jnp.where(fin(M, 2)[..., None, None], 0.5 * (M + jnp.swapaxes(M, -1, -2)),
+                                           jnp.eye(M.shape[-1])))[..., 0] > 0
+        ok &= jnp.broadcast_to(fin(M, 2) & sym & pd, batch)
+    if model.q_rest is not None:
+        ok &= jnp.broadcast_to(fin(model.q_rest, 1), batch)
+    for leaf in planner._leaves():
+        ok &= jnp.broadcast_to(jnp.isfinite(leaf) & (leaf > 0), batch)
+    return ok
 
 
 @functools.lru_cache(maxsize=256)
@@ -354,7 +488,8 @@ def _kernel_jvp(**statics):
     def _rule(axis_size, in_batched, primals, tangents):
         pb, tb = in_batched
         plain = any(jax.tree_util.tree_leaves((pb[0].chain, pb[4:], tb[0].chain, tb[4:])))
-        flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
+        flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True,
+                           error_estimate=True)
         if not plain and not any(jax.tree_util.tree_leaves(pb)):
             # Unmapped primals (jax.jacfwd's basis vmap): plain vmap of the JVP computes the primal
             # once and batches the tangents only (folding repeated the primal per tangent: the
@@ -423,10 +558,12 @@ def _vmap_rule(statics, axis_size, in_batched, args):
     planner = jax.tree_util.tree_map(lambda x, b: lift(x, b, 0), planner, pb)
     out = _kernel(**{**statics, "batch": (axis_size,) + batch})(
         model, planner, lift(q0, q0b, 1), lift(targets, tb, 2), t0s, hs)
-    return out, Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True)
+    return out, Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True,
+                           error_estimate=True)
 
 
-def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4, solver="rk4"):
+def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4, solver="rk4",
+             rtol=RTOL, atol=ATOL, max_steps=MAX_ADAPTIVE_STEPS):
     """Simulate one movement (per batch element) from ``q0`` (..., n) to ``target`` (..., m).
 
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
@@ -442,7 +579,7 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
     return _simulate(model, planner, q0, on_host(target, lambda a: a[..., None, :]), duration, dt, saveat,
-                     singular_tol, True, solver)
+                     singular_tol, True, solver, rtol, atol, max_steps)
 
 
 #: Most consecutive samples written to the trajectory-major outputs at once: one sample per
@@ -453,11 +590,10 @@ _BLOCK = 16
 _RUN_STATICS = ("h", "batch", "n_steps", "include_initial", "singular_tol", "single", "stage_loop", "solver")
 
 
-def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-               single, stage_loop=False, solver="rk4"):
-    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
+def _prepare(model, planner, q0, targets, batch):
+    """The flattened batch of a run: ``(chain, consts, planner, q (n, B), targets (M, m, B), field)``
+    with ``field(t, q, (planner, target)) -> (q̇, (q, x, q̇, ẋ, manipulability))``."""
     chain = model.chain
-    n, m = chain.n, chain.m
     B = math.prod(batch)
     core = {"W": 2, "KJ": 2, "q_rest": 1}
     model = replace(model, **{k: flatten_batch(getattr(model, k), batch, c) for k, c in core.items()
@@ -466,11 +602,6 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
     planner = planner.to_soa(batch)
     q = to_soa(flatten_batch(q0, batch, 1))
     tg = jnp.moveaxis(flatten_batch(targets, batch, 2), 0, -1)  # (M, m, B)
-    n_mov, n_seg = tg.shape[0], t0s.shape[0]
-    # Saved: the start of every segment (the first unless `include_initial`) and the last end.
-    S, offset = n_seg + include_initial, 1 - include_initial
-    comps = ((n,), (m,), (n,), (m,), ())
-    step_h = hs if h is None else h
 
     def field(t, qc, args):
         """``q̇`` and the saved observation ``(q, x, q̇, ẋ, manipulability)`` of ``(t, q)``."""
@@ -480,6 +611,21 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
         qd = model.qdot_soa(J, P, M, pl.force_soa(t, x, target, M), qc, consts)
         w = manipulability_soa(J)
         return qd, (qc, x, qd, mv(J, qd), w)
+
+    return chain, consts, planner, q, tg, field
+
+
+def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
+               single, stage_loop=False, solver="rk4"):
+    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
+    chain, consts, planner, q, tg, field = _prepare(model, planner, q0, targets, batch)
+    n, m = chain.n, chain.m
+    B = math.prod(batch)
+    n_mov, n_seg = tg.shape[0], t0s.shape[0]
+    # Saved: the start of every segment (the first unless `include_initial`) and the last end.
+    S, offset = n_seg + include_initial, 1 - include_initial
+    comps = ((n,), (m,), (n,), (m,), ())
+    step_h = hs if h is None else h
 
     def write(acc, j, obs, valid):
         """Samples ``obs`` (K, *comp, B) into rows ``j, ..., j + K − 1`` of the (B, M·S, *comp) outputs."""
@@ -492,7 +638,7 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
         return bufs, fin, wmin
 
     def movement(carry, inp):
-        qc, acc = carry
+        qc, acc, err = carry
         k, target = inp
         _, J0 = chain.fk_jac_soa(qc)
         args = (planner.start(admittance_terms_soa(J0, consts["A"])[1]), target)
@@ -501,26 +647,77 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
             # written at row 0 (one sample at a time) and overwritten by segment 1's.
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
-                                         stage_loop=stage_loop, solver=solver)
+            qc, acc, e, obs = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
+                                                 stage_loop=stage_loop, solver=solver)
         else:
-            qc, acc = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
-                                         stage_loop=stage_loop, solver=solver)
-        obs = field(t0s[-1] + n_steps * (hs[-1] if h is None else h), qc, args)[1]  # the end state
-        acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)
-        return (qc, acc), None
+            qc, acc, e, obs = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
+                                                 stage_loop=stage_loop, solver=solver)
+        acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)  # the end state
+        return (qc, acc, err + e), None
 
     # Distinct fills: XLA would merge equal ones (q and q̇, x and ẋ) and copy them apart (a whole-output
     # copy each); every row is overwritten.
     bufs = tuple(jnp.full((B, n_mov * S) + c, float(i), q.dtype) for i, c in enumerate(comps))
     acc = (bufs, jnp.ones((B,), bool), jnp.full((B,), jnp.inf, q.dtype))
-    (qT, (bufs, fin, wmin)), _ = lax.scan(movement, (q, acc), (jnp.arange(n_mov), tg))
-    fin = fin & jnp.all(jnp.isfinite(qT), axis=0)
+    (qT, (bufs, fin, wmin), err), _ = lax.scan(movement, (q, acc, jnp.zeros((B,), q.dtype)),
+                                               (jnp.arange(n_mov), tg))
+    fin = fin & jnp.all(jnp.isfinite(qT), axis=0) & jnp.isfinite(err)
     status = jnp.where(~fin, int(NONFINITE), jnp.where(wmin < singular_tol, int(SINGULAR), int(OK)))
     lead = batch if single else batch + (n_mov,)
     q_, x_, qd_, xd_, w_ = (b.reshape(lead + (S,) + c) for b, c in zip(bufs, comps))
     return Trajectory(t=t0s, q=q_, x=x_, qdot=qd_, xdot=xd_, manipulability=w_,
-                      status=status.reshape(batch))
+                      status=status.reshape(batch), error_estimate=err.reshape(batch))
+
+
+def _movements_adaptive(model, planner, q0, targets, *, batch, ts, include_initial, singular_tol, single, solver,
+                        rtol, atol, max_steps):
+    """The adaptive-step run (``dt=None``): every movement integrated by
+    :func:`~pmpjax._pmp.integrate.integrate_adaptive` to the save times ``ts``."""
+    chain, consts, planner, q, tg, field = _prepare(model, planner, q0, targets, batch)
+    n, m = chain.n, chain.m
+    B = math.prod(batch)
+    n_mov, S = tg.shape[0], len(ts)
+    comps = ((n,), (m,), (n,), (m,), ())
+    rows = jnp.arange(B)
+
+    def write(k):
+        def wr(acc, j, obs, mask):
+            bufs, fin, wmin = acc
+            r = k * S + jnp.minimum(j, S - 1)
+            bufs = tuple(b.at[rows, r].set(jnp.where(mask.reshape((B,) + (1,) * len(c)), jnp.moveaxis(o, -1, 0),
+                                                     b[rows, r]))
+                         for b, o, c in zip(bufs, obs, comps))
+            w = lax.stop_gradient(obs[4])
+            fin = fin & (~mask | jnp.all(jnp.isfinite(obs[0]), axis=0))
+            wmin = jnp.where(mask, jnp.minimum(wmin, jnp.where(jnp.isfinite(w), w, 0.0)), wmin)
+            return bufs, fin, wmin
+        return wr
+
+    def movement(carry, inp):
+        qc, acc, err, done = carry
+        k, target = inp
+        _, J0 = chain.fk_jac_soa(qc)
+        args = (planner.start(admittance_terms_soa(J0, consts["A"])[1]), target)
+        qc, acc, e, _, ok = integrate_adaptive(field, qc, ts, include_initial, args, acc, write(k), solver=solver,
+                                               rtol=rtol, atol=atol, max_steps=max_steps, span=ts[-1],
+                                               h0=ts[-1] / 64)
+        return (qc, acc, err + e, done & ok), None
+
+    bufs = tuple(jnp.full((B, n_mov * S) + c, jnp.nan, q.dtype) for c in comps)
+    acc = (bufs, jnp.ones((B,), bool), jnp.full((B,), jnp.inf, q.dtype))
+    init = (q, acc, jnp.zeros((B,), q.dtype), jnp.ones((B,), bool))
+    (qT, (bufs, fin, wmin), err, done), _ = lax.scan(movement, init, (jnp.arange(n_mov), tg))
+    fin = fin & jnp.all(jnp.isfinite(qT), axis=0) & jnp.isfinite(err)
+    status = jnp.where(~done, int(MAX_STEPS), jnp.where(~fin, int(NONFINITE),
+                                                        jnp.where(wmin < singular_tol, int(SINGULAR), int(OK))))
+    lead = batch if single else batch + (n_mov,)
+    q_, x_, qd_, xd_, w_ = (b.reshape(lead + (S,) + c) for b, c in zip(bufs, comps))
+    return Trajectory(t=jnp.asarray(ts), q=q_, x=x_, qdot=qd_, xdot=xd_, manipulability=w_,
+                      status=status.reshape(batch), error_estimate=err.reshape(batch))
+
+
+_run_adaptive = jax.jit(_movements_adaptive, static_argnames=(
+    "batch", "ts", "include_initial", "singular_tol", "single", "solver", "rtol", "atol", "max_steps"))
 
 
 #: The kernel, and the compile-light kernel for small batches (:func:`_primal_run`).
