@@ -10,6 +10,7 @@ MuJoCo and MJX are imported on first use (``pmpjax._base.mujoco``), not by ``imp
 from __future__ import annotations
 
 import functools
+import os
 from typing import Any
 
 import jax
@@ -28,12 +29,12 @@ _HINGE = 3  # mujoco.mjtJoint.mjJNT_HINGE
 
 
 def _mj_model(xml_or_model):
-    """An ``MjModel`` from a path, MJCF string, model, or an object carrying one as ``mj_model``
-    (e.g. ``pmpjax.CogArm``)."""
+    """An ``MjModel`` from a path (``str`` or ``os.PathLike``), MJCF string, model, or an object
+    carrying one as ``mj_model`` (e.g. ``pmpjax.CogArm``)."""
     inner = getattr(xml_or_model, "mj_model", None)
     if is_mj_model(inner):
         return inner
-    return load_mj_model(xml_or_model)
+    return load_mj_model(os.fspath(xml_or_model) if isinstance(xml_or_model, os.PathLike) else xml_or_model)
 
 
 @pytree_dataclass
@@ -278,7 +279,9 @@ class MjcfChain(Chain):
 
     ``MjcfChain(xml_or_model, site)``: ``xml_or_model`` a path, MJCF string, ``mujoco.MjModel``
     or an object holding one as ``mj_model`` (:class:`pmpjax.CogArm`); ``site`` the site name.
-    Only hinge and slide joints (``nq == nv``).
+    Only hinge and slide joints (``nq == nv``). ``joint_names`` (n,) the model's joint names in
+    ``qpos`` order (None when a joint is unnamed), so ``pmpjax.read_joint_angles(path,
+    joints=chain)`` picks a recording's columns by name.
     ``reachable`` accepts points closer to the first joint than 0.99 × the summed link offsets.
     """
 
@@ -290,6 +293,7 @@ class MjcfChain(Chain):
     m: int = static_field(default=3)
     center: tuple = static_field(default=(0.0, 0.0, 0.0))
     reach: float = static_field(default=np.inf)
+    joint_names: tuple[str, ...] | None = static_field(default=None)
 
     def __init__(self, xml_or_model, site: str):
         mujoco = import_mujoco()
@@ -324,6 +328,8 @@ class MjcfChain(Chain):
         object.__setattr__(self, "m", 3)
         object.__setattr__(self, "center", tuple(float(v) for v in center))
         object.__setattr__(self, "reach", float(reach))
+        names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in np.argsort(m.jnt_qposadr))
+        object.__setattr__(self, "joint_names", names if all(names) else None)
 
     def site_position(self, q):
         """Site position (3,) for one posture ``q`` (n,) (differentiable)."""
