@@ -81,6 +81,17 @@ def arimoto(k, tau):
     return lambda t: k * (1 - np.exp(-t / tau) - (t / tau) * np.exp(-t / tau))
 
 
+def minjerk_gain(t, T, cap):
+    """Time-base generator (Python floats): ``γ = ξ̇/(1 − ξ)`` of ``ξ(s) = 10 s³ − 15 s⁴ + 6 s⁵``,
+    ``s = t/T``, capped at ``cap``, and ``cap`` from ``t = T`` on. Computed as
+    ``30 s² / (T (1 − s)(6 s² + 3 s + 1))`` (``1 − ξ = (1 − s)³ (6 s² + 3 s + 1)``): exact up to the
+    cap, where ``1 − ξ`` would cancel."""
+    s = max(t / T, 0.0)
+    if s >= 1.0:
+        return cap
+    return min(30.0 * s * s / (T * (1.0 - s) * (6.0 * s * s + 3.0 * s + 1.0)), cap)
+
+
 # --- central differences: the one helper of the suite -------------------------------------------
 
 SQRT_EPS = float(np.sqrt(np.finfo(float).eps))

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _reference import arimoto, arm4_fk, arm4_jac, central_diff, pmp_field, pmp_qdot, wrist_jac
+from _reference import arimoto, arm4_fk, arm4_jac, central_diff, minjerk_gain, pmp_field, pmp_qdot, wrist_jac
 from scipy.integrate import solve_ivp
 
 import pmpjax as pj
@@ -35,14 +35,6 @@ def spd_with_cond(rng, n, cond, trace=4.0):
 def eq10_gain(J0, W, tau0):
     """``k = b_max / τ0`` with ``b_max`` the largest eigenvalue of ``B(q0) = (J W⁻¹ Jᵀ)⁻¹``."""
     return 1.0 / (np.linalg.eigvalsh(J0 @ np.linalg.inv(W) @ J0.T)[0] * tau0)
-
-
-def minjerk_gain(t, T, cap):
-    """Time-base generator: ``γ = ξ̇/(1 − ξ)`` of the minimum-jerk profile, capped at ``cap``."""
-    s = min(t / T, 1.0)
-    xi = 10 * s**3 - 15 * s**4 + 6 * s**5
-    dxi = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
-    return cap if s >= 1.0 else min(dxi / max(1.0 - xi, 1e-12), cap)
 
 
 def arm_radau(q0, x_d, KJ, q_rest, W, force, T=1.0):

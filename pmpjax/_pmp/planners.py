@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.linalg import spd_solve
-from .._base.profiles import minimum_jerk
+from .._base.profiles import minimum_jerk_hazard
 from .._base.pytree import pytree_dataclass, replace, static_field
 from .._base.validate import as_array, check_positive
 
@@ -126,8 +126,17 @@ class MinimumJerkPlanner(Planner):
     """Time-base generator (Morasso et al. 2010) in task-velocity form.
 
     ``F = γ(t) B(q) (x_d − x)`` so that, along the λ0-PMP (``B ẋ = F``), ``ẋ = γ(t)(x_d − x)`` and
-    the hand follows the straight line with the minimum-jerk profile ``ξ(t/T)``, reaching the
-    target at ``t = T``: ``γ = ξ̇ / (1 − ξ)``, capped at ``gain_cap`` [1/s] near and after ``T``.
+    the hand follows the straight line with the minimum-jerk profile ``ξ(s) = 10 s³ − 15 s⁴ + 6 s⁵``,
+    ``s = t/T``, ``T`` = ``duration`` [s], reaching the target at ``t = T``. The gain [1/s] is
+
+        ``γ(t) = min(ξ̇ / (1 − ξ), gain_cap) = min(30 s² / (T (1 − s)(6 s² + 3 s + 1)), gain_cap)``
+
+    for ``t < T`` (``1 − ξ = (1 − s)³ (6 s² + 3 s + 1)``, ``ξ̇ = 30 s² (1 − s)² / T``), and ``gain_cap``
+    [1/s] for ``t ≥ T``. The uncapped ratio grows without bound as ``t → T``; the cap (reached where
+    ``1 − s ≈ 3 / (T gain_cap)`` for large caps) turns the end of the movement into an exponential
+    approach at rate ``gain_cap`` and bounds the stiffness (RK4 needs ``dt < 2.5 / gain_cap``).
+    ``γ`` is exact up to the cap and differentiable in ``t``, ``duration`` and ``gain_cap`` at every
+    ``t`` (see :func:`pmpjax._base.profiles.minimum_jerk_hazard`).
     """
 
     duration: jax.Array
@@ -139,11 +148,7 @@ class MinimumJerkPlanner(Planner):
         check_positive("gain_cap", self.gain_cap)
 
     def gain(self, t):
-        s = jnp.clip(t / self.duration, 0.0, 1.0)
-        xi, dxi_ds = minimum_jerk(s)
-        dxi = dxi_ds / self.duration
-        one_minus = jnp.maximum(1.0 - xi, 1e-12)
-        return jnp.where(s < 1.0, jnp.minimum(dxi / one_minus, self.gain_cap), self.gain_cap)
+        return minimum_jerk_hazard(t / self.duration, self.gain_cap, self.duration)
 
     def force_soa(self, t, x, target, M):
         return spd_solve(M, _scale(self.gain(t), target - x))
