@@ -4,6 +4,8 @@ from ._analysis.movement import SmoothedPath as SmoothedPath
 from ._analysis.movement import gcv_lambda as gcv_lambda
 from ._analysis.movement import segment_by_speed as segment_by_speed
 from ._analysis.movement import smooth_path as smooth_path
+from ._analysis.reaches import Reaches as Reaches
+from ._analysis.reaches import find_movements as find_movements
 from ._base.compile import fast_compile_jit as fast_compile_jit
 from ._base.status import Status as Status
 from ._base.status import status_message as status_message
