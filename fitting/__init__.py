@@ -28,6 +28,10 @@ from ._ik.weights import IKWeightsResult as IKWeightsResult
 from ._ik.weights import estimate_ik_weights as estimate_ik_weights
 from ._ik.weights import estimate_ik_weights_lm as estimate_ik_weights_lm
 from ._ik.weights import ik_model_error as ik_model_error
+from ._movements import MovementFit as MovementFit
+from ._movements import MovementPrediction as MovementPrediction
+from ._movements import fit_movements as fit_movements
+from ._movements import predict_movements as predict_movements
 from ._optimise import LeastSquaresResult as LeastSquaresResult
 from ._optimise import covariance as covariance
 from ._optimise import least_squares as least_squares

@@ -10,9 +10,8 @@ from its dense output on one clock.
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import solve_ivp
-
 from _reference import arimoto, planar_fk, planar_jac, pmp_field
+from scipy.integrate import solve_ivp
 
 RTOL, ATOL = 1e-9, 1e-11
 

@@ -27,6 +27,7 @@ NOT_ENTRY_POINTS = {
     "fitting.SweepResult",
     "fitting.PointingModelFit",
     "fitting.ReachingFit", "fitting.ReachingPrediction", "fitting.StiffnessFit",
+    "fitting.MovementFit", "fitting.MovementPrediction",
 }
 
 

@@ -157,7 +157,8 @@ def _status_from(traj_status):
 
 def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
     """Simulate rows (R,) with ``solver`` at ``steps`` per sample (RK4: at least, more if needed to
-    keep it well inside its stability bound); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
+    keep it well inside its stability bound; rows the error estimate flags ``INACCURATE`` again at
+    twice the steps, up to three times); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
     ``status`` (R,) as ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
@@ -179,6 +180,15 @@ def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
         q0, target = np.asarray(q0)[good], np.asarray(target)[good]
     traj = _simulate(model, planner, q0, target, steps, solver)
     q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
+    # Rows whose error estimate asks for it are simulated again at twice the steps (up to 8x).
+    for _ in range(3):
+        redo = status == int(Status.INACCURATE)
+        if not redo.any():
+            break
+        steps *= 2
+        traj = _simulate(model, planner, q0, target, steps, solver)
+        q[redo], x[redo] = np.asarray(traj.q)[redo], np.asarray(traj.x)[redo]
+        status[redo] = _status_from(traj.status)[redo]
     q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
     return q, x, status
 

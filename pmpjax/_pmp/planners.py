@@ -46,6 +46,10 @@ class Planner:
     def _leaves(self):
         return []
 
+    def _positive_leaves(self):
+        """Leaves that must be positive (checked per item inside a caller's ``jit``)."""
+        return self._leaves()
+
     def to_soa(self, batch):
         """Broadcast leaves to ``batch`` and flatten like the state (see ``simulate``)."""
         return jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, batch).reshape(-1), self)
@@ -89,12 +93,16 @@ class ArimotoPlanner(Planner):
     """Arimoto stiffness ``K(t) = k (1 − e^{−t/τ} − (t/τ) e^{−t/τ}) I`` (Eq 8).
 
     ``k`` [N/m] and extrinsic time constant ``tau`` [s]. With ``k=None`` and ``tau0`` given, ``k``
-    is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``.
+    is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``. ``delay`` [s]
+    (default 0): the target appeared ``delay`` before ``t = 0``, so ``K(t)`` is Eq 8 at ``t + delay``
+    (a model started at rest detected after the target's onset); a negative ``delay`` starts the
+    gain at ``t = −delay`` (zero before).
     """
 
     k: jax.Array | None
     tau: jax.Array
     tau0: jax.Array | None = None
+    delay: jax.Array = 0.0
 
     def __post_init__(self):
         check_positive("tau", self.tau)
@@ -104,6 +112,7 @@ class ArimotoPlanner(Planner):
             check_positive("tau0", self.tau0)
         else:
             check_positive("k", self.k)
+        as_array("delay", self.delay)
 
     def start(self, M0):
         if self.k is None:
@@ -111,13 +120,16 @@ class ArimotoPlanner(Planner):
         return self
 
     def gain(self, t):
-        s = t / self.tau
+        s = jnp.maximum(t + self.delay, 0.0) / self.tau
         return self.k * (1.0 - (1.0 + s) * jnp.exp(-s))
 
     def max_gain(self):
         return None if self.k is None else np.max(np.asarray(self.k))
 
     def _leaves(self):
+        return [v for v in (self.k, self.tau, self.tau0, self.delay) if v is not None]
+
+    def _positive_leaves(self):
         return [v for v in (self.k, self.tau, self.tau0) if v is not None]
 
 

@@ -386,7 +386,9 @@ def _valid_items(model, planner, q0, targets, batch):
     if model.q_rest is not None:
         ok &= jnp.broadcast_to(fin(model.q_rest, 1), batch)
     for leaf in planner._leaves():
-        ok &= jnp.broadcast_to(jnp.isfinite(leaf) & (leaf > 0), batch)
+        ok &= jnp.broadcast_to(jnp.isfinite(leaf), batch)
+    for leaf in planner._positive_leaves():
+        ok &= jnp.broadcast_to(leaf > 0, batch)
     return ok
 
 

@@ -1,0 +1,7 @@
+"""Fits of the λ0-PMP through the reaches of continuous joint-angle recordings, on any chain."""
+
+from .fit import MovementFit as MovementFit
+from .fit import fit_movements as fit_movements
+from .predict import BASELINES as BASELINES
+from .predict import MovementPrediction as MovementPrediction
+from .predict import predict_movements as predict_movements

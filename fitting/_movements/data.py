@@ -1,0 +1,125 @@
+"""A subject's reaches on normalised time, cut out of continuous joint-angle recordings.
+
+Each reach found by :func:`pmpjax.find_movements` (from rest before its onset, in the recording's
+own clock, to the next reach's start: the hold on the target) is resampled at ``SAMPLES`` equally spaced times by linear
+interpolation of the recorded joint angles. Reaches cut short by the next one (the hand still
+moving when the next target appeared) are left out with their reason: their target is unknown.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+import pmpjax as pj
+
+#: Samples per reach on normalised time (as the HuG-MP fits).
+SAMPLES = 50
+SAMPLE_TIMES = tuple(float(v) for v in np.linspace(0.0, 1.0, SAMPLES))
+#: The last reach of a recording runs on after its found end by this fraction of its window (the
+#: others run on to the next reach's start): the model's reach ends at rest on its target.
+HOLD_EXTENSION = 0.5
+ONSET_LEAD = 0.25
+#: The start and end postures are the mean recorded posture over this long before them [s].
+REST_AVERAGE = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class SubjectReaches:
+    """One subject's usable reaches (B of them): ``recording`` (B,) names, ``index`` (B,) the
+    reach's row in its recording's :class:`pmpjax.Reaches`, ``t`` (B, S) [s] the sample times in
+    the recording's clock, ``q_obs`` (B, S, n) [rad], ``duration`` (B,) [s]; ``q_start``, ``q_end``
+    (B, n) [rad] the start and end postures, averaged at rest (the model's initial posture and,
+    through the chain, its target);
+    ``skipped`` a list of ``(recording, t_from, t_to, reason)``."""
+
+    subject: str
+    recording: tuple[str, ...]
+    index: np.ndarray
+    t: np.ndarray
+    q_obs: np.ndarray
+    duration: np.ndarray
+    q_start: np.ndarray
+    q_end: np.ndarray
+    skipped: tuple = ()
+
+    def __len__(self):
+        return int(self.duration.shape[0])
+
+
+def check_recordings(recordings, chain) -> list:
+    """``recordings`` as a list of :class:`pmpjax.JointRecording` with ``chain.n`` joints."""
+    if isinstance(recordings, pj.JointRecording):
+        recordings = [recordings]
+    try:
+        recordings = list(recordings)
+    except TypeError as e:
+        raise TypeError("`recordings` must be a list of pmpjax.JointRecording (pmpjax.read_joint_angles)") from e
+    if not recordings:
+        raise ValueError("`recordings` is empty")
+    for r in recordings:
+        if not isinstance(r, pj.JointRecording):
+            raise TypeError(f"`recordings` must hold pmpjax.JointRecording objects (pmpjax.read_joint_angles), "
+                            f"got {type(r).__name__}")
+        if r.q.shape[1] != chain.n:
+            raise ValueError(f"recording '{r.name}' has {r.q.shape[1]} joints ({', '.join(r.joint_names)}) but the "
+                             f"chain has {chain.n}")
+    names = [r.name for r in recordings]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"`recordings` holds recordings with the same name twice: {dup}")
+    return recordings
+
+
+def subject_reaches(subject: str, recordings: Sequence, chain, find_options: dict) -> SubjectReaches:
+    """The usable reaches of ``recordings`` (all of one subject), resampled on normalised time."""
+    rows, skipped = [], []
+    for rec in recordings:
+        found = pj.find_movements(rec, chain, **find_options)
+        skipped += [(rec.name, float(a), float(b), why) for a, b, why in found.skipped]
+        K = len(found.start)
+        for k in range(K):
+            t0, t1 = float(found.t_start[k]), float(found.t_end[k])
+            if ONSET_LEAD is not None:
+                t0 = max(float(rec.t[0]), float(found.t_onset[k]) - ONSET_LEAD)
+            # The model's reach ends at rest on its target: the window runs on to the next reach's
+            # start (the hold), or for the last reach as long again as the found window allows.
+            if k + 1 < K:
+                t1 = max(t1, float(found.t_start[k + 1]))
+            else:
+                t1 = min(float(rec.t[-1]), t1 + (t1 - t0) * HOLD_EXTENSION)
+            if bool(found.cut_short[k]):
+                skipped.append((rec.name, t0, t1, "cut short by the next reach (its target is unknown)"))
+                continue
+            ts = np.linspace(t0, t1, SAMPLES)
+            q = np.stack([np.interp(ts, rec.t, rec.q[:, j]) for j in range(chain.n)], -1)
+            ends = np.stack([_rest_mean(rec, t0), _rest_mean(rec, t1)])
+            rows.append((rec.name, k, ts, q, t1 - t0, ends[0], ends[1]))
+    n = chain.n
+    if not rows:
+        return SubjectReaches(subject, (), np.zeros(0, int), np.zeros((0, SAMPLES)), np.zeros((0, SAMPLES, n)),
+                              np.zeros(0), np.zeros((0, n)), np.zeros((0, n)), tuple(skipped))
+    return SubjectReaches(subject, tuple(r[0] for r in rows), np.array([r[1] for r in rows]),
+                          np.stack([r[2] for r in rows]), np.stack([r[3] for r in rows]),
+                          np.array([r[4] for r in rows]), np.stack([r[5] for r in rows]),
+                          np.stack([r[6] for r in rows]), tuple(skipped))
+
+
+def _rest_mean(rec, t: float):
+    """The mean recorded posture (n,) over the ``REST_AVERAGE`` seconds up to ``t`` (the hand at rest
+    there): one noisy sample as the model's start or target would bias the fit, and a low-pass
+    filter would mix in the movement next to it."""
+    sel = (rec.t <= t + 1e-9) & (rec.t >= t - REST_AVERAGE - 1e-9)
+    if not sel.any():
+        sel = np.argmin(np.abs(rec.t - t)) == np.arange(rec.t.shape[0])
+    return np.asarray(rec.q, float)[sel].mean(0)
+
+
+def group_by_subject(recordings) -> dict:
+    """``{subject: [recordings]}`` in order of first appearance."""
+    out: dict = {}
+    for r in recordings:
+        out.setdefault(r.subject, []).append(r)
+    return out

@@ -1,0 +1,396 @@
+"""``fit_movements``: the λ0-PMP of each subject, fitted through the trajectories of its reaches,
+on any chain, from continuous joint-angle recordings.
+
+**Fit** (per subject; all subjects in one compiled call, one after the other inside it by
+``lax.map``). Stage 1 fits ``KJ`` and ``q_rest`` to the final postures through
+``pmpjax.equilibrium_posture`` (Donders' law), from ``KJ = I`` and ``q_rest`` = the mean final
+posture. **Identifiability:** at the optimum the residual Jacobian of the trajectories (data
+rows) is decomposed; its right singular vectors with singular values below
+``IDENTIFIABILITY_RCOND`` of the largest are directions the data cannot determine (on the HuG-MP
+arm: shifting ``q_rest`` along ``KJ⁻¹ e_elbow``, which no movement and no final posture sees).
+Stage 2 does not move along them (the residual's gradient there is zero, so Levenberg–Marquardt's
+steps have no component there to first order, and the rest-angle bounds hold them in the recorded
+range): their values are a gauge, not an estimate, reported by parameter name (``unidentified``,
+``unidentified_directions``). (Projecting stage 2 onto the identified directions of the stage-1
+optimum was measured to bias τ by 13–30 % on the shoulder–elbow arm: the directions turn with
+``KJ``.) Stage 2 fits every parameter
+to the joint trajectories through ``pmpjax.simulate`` (RODAS4, forward-mode derivatives); the
+integration error at the optimum (against twice the steps) is checked and the step count doubled
+while it exceeds ``INTEGRATION_TOL_DEG``. Converged means Levenberg–Marquardt met a tolerance
+(relative cost change 1e-8, or every parameter within 0.014 standard errors of the optimum).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import pmpjax as pj
+from pmpjax import Status, status_message
+from pmpjax.internal import fast_compile_jit
+
+from .._optimise import covariance, least_squares, spd_size
+from . import model as mdl
+from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, subject_reaches
+
+#: Singular values below this fraction of the largest mark unidentified directions.
+IDENTIFIABILITY_RCOND = 1e-6
+#: Largest integration error at the optimum a fit accepts [deg] (steps are doubled above it).
+INTEGRATION_TOL_DEG = 0.01
+STEPS_PER_SAMPLE = 2
+MAX_STEPS_PER_SAMPLE = 32
+
+
+@dataclasses.dataclass(frozen=True)
+class MovementFit:
+    """One row per subject (S subjects, ``n`` joints, ``p`` parameters).
+
+    ``subjects`` (S,); ``KJ`` (S, n, n) [Nm/rad], trace n; ``q_rest`` (S, n) [rad]; ``W`` (S, n, n)
+    damping per unit τ0 (trace n; the damping of a reach is ``τ0 W``); ``tau``, ``tau0`` (S,) [s]
+    (``time_constants="seconds"``) or fractions of each reach's duration (``"fractions"``; ``tau``
+    NaN for the time-base generator, whose duration fraction is ``duration``); ``delay`` (S,)
+    how long before each reach's window the target appeared (Arimoto; same unit); ``converged``,
+    ``status`` (S,) (``pmpjax.Status``; ``messages``); ``params``, ``stderr`` (S, p), ``cov``
+    (S, p, p) with ``param_names`` (zero variance along unidentified directions); ``unidentified``
+    (S,) tuples of the parameter names that load on each unidentified direction at the optimum, and
+    ``unidentified_directions`` (S, p, p) the unit directions as rows (zero rows for the others);
+    ``singular_values`` (S, p) of the trajectory Jacobian (data rows) at the optimum; ``loss`` (S,)
+    ½ Σ r²; ``rmse_deg`` (S,) training joint RMSE; ``aic``, ``bic`` (S,); ``n_reaches``,
+    ``n_residuals`` (S,); ``lm_steps`` (S, 2); ``solver``, ``steps_per_sample``,
+    ``integration_error_deg`` (S,) (largest joint difference against twice the steps);
+    ``bound_active`` (S, 1 + n) (cond(KJ), each rest angle); ``reaches`` {subject:
+    SubjectReaches} the windows fitted; ``skipped`` {subject: [(recording, t_from, t_to, reason)]};
+    ``chain`` the chain; ``joint_names``; ``model``, ``damping``, ``time_constants``.
+    """
+
+    subjects: tuple[str, ...]
+    KJ: np.ndarray
+    q_rest: np.ndarray
+    W: np.ndarray
+    tau: np.ndarray
+    tau0: np.ndarray
+    duration: np.ndarray
+    delay: np.ndarray
+    converged: np.ndarray
+    status: np.ndarray
+    params: np.ndarray
+    stderr: np.ndarray
+    cov: np.ndarray
+    param_names: tuple[str, ...]
+    unidentified: tuple
+    unidentified_directions: np.ndarray
+    singular_values: np.ndarray
+    loss: np.ndarray
+    rmse_deg: np.ndarray
+    aic: np.ndarray
+    bic: np.ndarray
+    n_reaches: np.ndarray
+    n_residuals: np.ndarray
+    lm_steps: np.ndarray
+    solver: str
+    steps_per_sample: int
+    integration_error_deg: np.ndarray
+    bound_active: np.ndarray
+    reaches: dict
+    skipped: dict
+    chain: object
+    joint_names: tuple[str, ...]
+    model: str
+    damping: str
+    time_constants: str
+
+    @property
+    def messages(self) -> list[str]:
+        return [status_message(s) for s in self.status]
+
+    def subject_index(self, subject) -> int:
+        return self.subjects.index(str(subject))
+
+
+def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
+    """Pad subjects' reaches to a common count (a multiple of ``bucket``; padding = copies of the
+    first reach with weight 0)."""
+    B = max(len(s) for s in subjects)
+    B = -(-B // bucket) * bucket
+    out = {k: [] for k in ("q_obs", "q_start", "q_end", "duration", "weight", "target", "lo", "hi")}
+    margin = np.deg2rad(mdl.REST_MARGIN_DEG)
+    for s in subjects:
+        pad = B - len(s)
+        idx = np.concatenate([np.arange(len(s)), np.zeros(pad, int)])
+        out["q_obs"].append(s.q_obs[idx])
+        out["q_start"].append(s.q_start[idx])
+        out["q_end"].append(s.q_end[idx])
+        out["duration"].append(s.duration[idx])
+        out["weight"].append(np.concatenate([np.ones(len(s)), np.zeros(pad)]))
+        out["lo"].append(s.q_obs.min((0, 1)) - margin)
+        out["hi"].append(s.q_obs.max((0, 1)) + margin)
+    data = {k: np.stack(v) for k, v in out.items() if v and k != "target"}
+    data["target"] = np.asarray(_fk(chain, data["q_end"]))
+    return data
+
+
+@fast_compile_jit
+def _fk(chain, q):
+    return chain.fk(q)
+
+
+@partial(fast_compile_jit, static_argnames=("cfg",))
+def _stage1(theta0, data, chain, max_steps, *, cfg):
+    def one(th0, dat):
+        r = least_squares(lambda th, d: mdl.final_residual(th, d, chain, cfg), th0, dat, max_steps=max_steps,
+                          ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
+        return dict(x=r.x, converged=r.converged, status=r.status, steps=r.steps, cost=r.cost,
+                    start=mdl.stage2_start(r.x, cfg))
+
+    return jax.lax.map(lambda a: one(*a), (theta0, data))
+
+
+@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
+def _identifiability(theta, data, chain, *, cfg, steps, solver):
+    """Singular values (S, p) of the trajectory residual's Jacobian at ``theta`` (S, p) and its
+    unidentified directions (S, p, p) as rows (zero rows for the identified ones)."""
+
+    def one(th, dat):
+        # the data's rows only: the bounds' penalties would make any direction "identified"
+        J = jax.jacfwd(lambda t: mdl.trajectory_residual(t, dat, chain, cfg, steps, solver))(th)[: -(1 + cfg.n)]
+        J = jnp.where(jnp.isfinite(J), J, 0.0)
+        _, s, Vt = jnp.linalg.svd(J, full_matrices=False)
+        keep = s > IDENTIFIABILITY_RCOND * s[0]
+        V0 = jnp.where(keep[:, None], 0.0, Vt)  # rows: unidentified directions
+        return s, V0
+
+    return jax.lax.map(lambda a: one(*a), (theta, data))
+
+
+@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
+def _stage2(theta0, data, chain, max_steps, *, cfg, steps, solver):
+    def one(th0, dat):
+        res = lambda th, d: mdl.trajectory_residual(th, d, chain, cfg, steps, solver)  # noqa: E731
+        r = least_squares(res, th0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
+        cov, _, _, _ = covariance(r)
+        return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status,
+                    steps=r.steps, cov=cov)
+
+    return jax.lax.map(lambda a: one(*a), (theta0, data))
+
+
+@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
+def _integration_error(theta, data, chain, *, cfg, steps, solver):
+    """(S,) largest joint difference [rad] of the used reaches between ``steps`` and ``2·steps``."""
+
+    def one(th, dat):
+        p = mdl.unpack(th, cfg)
+        model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg)
+        q0, tg = dat["q_start"], dat["target"]
+        a = mdl.simulate(chain, model, planner, q0, tg, steps, solver).q
+        b = mdl.simulate(chain, model, planner, q0, tg, 2 * steps, solver).q
+        return jnp.max(jnp.where((dat["weight"] > 0)[:, None, None], jnp.abs(a - b), 0.0))
+
+    return jax.lax.map(lambda a: one(*a), (theta, data))
+
+
+def _check_choice(name, value, options):
+    if value not in options:
+        raise ValueError(f"`{name}` must be one of {', '.join(map(repr, options))}; got {value!r}")
+
+
+def _check_chain(chain):
+    if not isinstance(chain, pj.Chain):
+        raise TypeError(f"`chain` must be a pmpjax chain (MjcfChain, ShoulderElbowArm, PlanarArm, Wrist, "
+                        f"FunctionChain), got {type(chain).__name__}")
+    return chain
+
+
+def fit_movements(
+    chain,
+    recordings,
+    *,
+    model: str = "lambda0",
+    damping: str = "tau0_KJ",
+    time_constants: str = "seconds",
+    max_steps=(100, 100),
+    stiffness_cond_max: float | None = mdl.STIFFNESS_COND_MAX,
+    find_options: dict | None = None,
+) -> MovementFit:
+    """Fit the λ0-PMP per subject to the reaches inside continuous joint-angle recordings.
+
+    **Arguments:**
+    - ``chain``: the arm (``pmpjax.MjcfChain``, ``ShoulderElbowArm``, ``PlanarArm``, ``Wrist``,
+      ``FunctionChain``; n joints).
+    - ``recordings``: :class:`pmpjax.JointRecording` objects (``pmpjax.read_joint_angles``) with the
+      chain's joints, grouped by their ``subject``; reaches are found by
+      :func:`pmpjax.find_movements` (``find_options`` passed on), cut-short ones left out.
+    - ``model``: "lambda0" (Arimoto, Eq 8 with Eq 10's gain) or "lambda0_minjerk" (time-base
+      generator); ``damping``: "tau0_KJ" (Eq 7), "diagonal" or "full"; ``time_constants``:
+      "seconds" (one τ, τ0 per subject) or "fractions" (of each reach's duration).
+    - ``max_steps``: Levenberg–Marquardt iterations of stage 1 (final postures) and stage 2
+      (trajectories; 0: a Donders-fitted model).
+    - ``stiffness_cond_max``: bound on cond(KJ) (None: none).
+
+    **Returns:** a :class:`MovementFit`. **Raises:** ``TypeError``/``ValueError`` naming the
+    argument for bad options and recordings whose joints do not match the chain; ``ValueError``
+    when no subject has a usable reach. A subject without usable reaches gets ``TOO_FEW_DATA``.
+
+    **Cost:** one compilation of each stage per chain and option set (tens of seconds), then
+    seconds per subject for a few tens of reaches (``benchmarks/movements.py``).
+    """
+    chain = _check_chain(chain)
+    recordings = check_recordings(recordings, chain)
+    _check_choice("model", model, mdl.MODELS)
+    _check_choice("damping", damping, mdl.DAMPINGS)
+    _check_choice("time_constants", time_constants, mdl.TIME_CONSTANTS)
+    try:
+        ms = tuple(int(v) for v in max_steps)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"`max_steps` must be a pair of integers, got {max_steps!r}") from e
+    if len(ms) != 2 or ms[0] < 1 or ms[1] < 0:
+        raise ValueError(f"`max_steps` must be (stage-1 >= 1, stage-2 >= 0) iterations, got {max_steps!r}")
+    cond_max = math.inf if stiffness_cond_max is None else float(stiffness_cond_max)
+    if not cond_max > 1.0:
+        raise ValueError(f"`stiffness_cond_max` must be > 1 (or None), got {stiffness_cond_max!r}")
+    cfg = mdl.Config(chain.n, model, damping, time_constants, cond_max=cond_max)
+    joints = tuple(recordings[0].joint_names)
+    by_subject = group_by_subject(recordings)
+    found = {s: subject_reaches(s, recs, chain, dict(find_options or {})) for s, recs in by_subject.items()}
+    usable = {s: r for s, r in found.items() if len(r) > 0}
+    if not usable:
+        raise ValueError("no subject has a usable reach: " + "; ".join(
+            f"{s}: {len(r.skipped)} stretches skipped" for s, r in found.items()))
+    empty = [s for s in found if s not in usable]
+    if empty:
+        warnings.warn(f"fit_movements: no usable reach for {', '.join(empty)} (TOO_FEW_DATA)", stacklevel=2)
+    out = _fit(chain, list(usable.values()), cfg, ms)
+    return _assemble(chain, found, usable, out, cfg, joints)
+
+
+def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
+    data = _stack(subjects, chain)
+    S = len(subjects)
+    k = spd_size(cfg.n)
+    th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
+    s1 = jax.device_get(_stage1(th1, data, chain, np.int32(ms[0]), cfg=cfg))
+    theta0 = np.asarray(s1["start"])
+    solver, steps = "rodas4", STEPS_PER_SAMPLE
+    out = dict(stage1=s1, solver=solver, B=data["weight"].shape[1])
+    lm2 = np.zeros(S, int)
+    if ms[1] == 0:
+        sv, V0 = jax.device_get(_identifiability(theta0, data, chain, cfg=cfg, steps=steps, solver=solver))
+        out.update(singular_values=sv, V0=V0)
+        out.update(x=theta0, cost=s1["cost"], converged=s1["converged"], status=s1["status"],
+                   cov=np.full(theta0.shape + theta0.shape[-1:], np.nan), residual=None, steps=steps,
+                   integration_error_deg=np.full(S, np.nan), lm2=lm2)
+        return out
+    x = theta0
+    for _ in range(4):
+        s2 = jax.device_get(_stage2(x, data, chain, np.int32(ms[1]), cfg=cfg, steps=steps, solver=solver))
+        lm2 = lm2 + s2["steps"]
+        err = np.rad2deg(np.asarray(_integration_error(s2["x"], data, chain, cfg=cfg, steps=steps, solver=solver)))
+        finite = np.all(np.isfinite(s2["x"]), axis=-1)
+        if np.all(~finite | (err <= INTEGRATION_TOL_DEG)) or steps >= MAX_STEPS_PER_SAMPLE:
+            break
+        x = np.where(finite[:, None], s2["x"], x)
+        steps *= 2
+    x = np.where(np.all(np.isfinite(s2["x"]), axis=-1)[:, None], s2["x"], theta0)
+    sv, V0 = jax.device_get(_identifiability(x, data, chain, cfg=cfg, steps=steps, solver=solver))
+    out.update(singular_values=sv, V0=V0)
+    out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], cov=s2["cov"],
+               residual=s2["residual"], steps=steps, integration_error_deg=err, lm2=lm2)
+    bad = err > INTEGRATION_TOL_DEG
+    if np.any(bad):
+        warnings.warn(f"fit_movements: the integration error at the optimum stays above {INTEGRATION_TOL_DEG}° "
+                      f"({', '.join(f'{e:.3g}°' for e in err[bad])}) at {steps} steps per sample", stacklevel=3)
+    return out
+
+
+def _unidentified_names(V0, names, cfg) -> tuple:
+    """For each unidentified direction (rows of ``V0``, zero rows skipped), the parameter names
+    with loadings above a third of the largest."""
+    out = []
+    for v in np.asarray(V0):
+        if not np.any(v):
+            continue
+        a = np.abs(v)
+        out.append(tuple(names[i] for i in np.flatnonzero(a >= a.max() / 3)))
+    return tuple(out)
+
+
+def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
+    names_all = tuple(found)
+    S_all, n = len(names_all), cfg.n
+    p = mdl.n_params(cfg)
+    pnames = mdl.param_names(cfg, joints)
+    idx = {s: i for i, s in enumerate(usable)}
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    params, cov = nan(S_all, p), nan(S_all, p, p)
+    KJ, W, q_rest = nan(S_all, n, n), nan(S_all, n, n), nan(S_all, n)
+    tau, tau0, dur, delay = nan(S_all), nan(S_all), nan(S_all), nan(S_all)
+    status = np.full(S_all, int(Status.TOO_FEW_DATA))
+    loss, rmse, aic, bic, err = nan(S_all), nan(S_all), nan(S_all), nan(S_all), nan(S_all)
+    n_reach, n_res = np.zeros(S_all, int), np.zeros(S_all, int)
+    lm = np.zeros((S_all, 2), int)
+    sv, unident, V0 = nan(S_all, p), [()] * S_all, np.zeros((S_all, p, p))
+    bound = np.zeros((S_all, 1 + n), bool)
+    for a, s in enumerate(names_all):
+        if s not in idx:
+            continue
+        i = idx[s]
+        x = np.asarray(out["x"][i])
+        params[a], cov[a] = x, out["cov"][i]
+        pr = jax.device_get(mdl.unpack(jnp.asarray(x), cfg))
+        KJ[a], W[a], q_rest[a] = pr["KJ"], pr["W"], pr["q_rest"]
+        if cfg.model == "lambda0":
+            tau[a], delay[a] = pr["a"], pr["delay"]
+        else:
+            dur[a] = pr["a"]
+        tau0[a] = pr["a0"]
+        status[a] = int(out["status"][i])
+        n_reach[a] = len(usable[s])
+        per = (SAMPLES - 1 + 1) * n
+        N = n_reach[a] * per
+        n_res[a] = N
+        cost = float(out["cost"][i])
+        loss[a] = cost
+        if out["residual"] is not None:
+            r = np.asarray(out["residual"][i])[: out["B"] * per].reshape(out["B"], per)
+            r = r[: n_reach[a], : (SAMPLES - 1) * n]
+            rmse[a] = np.rad2deg(np.sqrt(np.sum(r**2) / (n * n_reach[a])))
+        sigma2 = 2 * cost / max(N, 1)
+        aic[a] = N * math.log(max(sigma2, 1e-300)) + 2 * p
+        bic[a] = N * math.log(max(sigma2, 1e-300)) + p * math.log(max(N, 1))
+        err[a] = out["integration_error_deg"][i]
+        lm[a] = (int(out["stage1"]["steps"][i]), int(out["lm2"][i]))
+        sv[a] = out["singular_values"][i]
+        unident[a] = _unidentified_names(out["V0"][i], pnames, cfg)
+        V0[a] = out["V0"][i]
+        k = spd_size(n)
+        w = np.linalg.eigvalsh(KJ[a])
+        bound[a, 0] = math.log(w[-1] / w[0]) >= math.log(cfg.cond_max) - 3 * mdl.BOUND_WIDTH[0]
+        qs = usable[s].q_obs
+        margin = np.deg2rad(mdl.REST_MARGIN_DEG)
+        lo, hi = qs.min((0, 1)) - margin, qs.max((0, 1)) + margin
+        bound[a, 1:] = (x[k:k + n] >= hi - 3 * mdl.BOUND_WIDTH[1]) | (x[k:k + n] <= lo + 3 * mdl.BOUND_WIDTH[1])
+    stderr = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
+    return MovementFit(
+        subjects=names_all, KJ=KJ, q_rest=q_rest, W=W, tau=tau, tau0=tau0, duration=dur, delay=delay,
+        converged=status == int(Status.SUCCESSFUL), status=status, params=params, stderr=stderr, cov=cov,
+        param_names=pnames, unidentified=tuple(unident), unidentified_directions=V0,
+        singular_values=sv, loss=loss, rmse_deg=rmse, aic=aic,
+        bic=bic, n_reaches=n_reach, n_residuals=n_res, lm_steps=lm, solver=out["solver"],
+        steps_per_sample=int(out["steps"]), integration_error_deg=err, bound_active=bound,
+        reaches={s: found[s] for s in names_all}, skipped={s: list(found[s].skipped) for s in names_all},
+        chain=chain, joint_names=joints, model=cfg.model, damping=cfg.damping, time_constants=cfg.time_constants)
+
+
+def subject_model(fit: MovementFit, subject: str, duration):
+    """The fitted subject's model and planner for reaches of ``duration`` (B,) [s] (normalised time)."""
+    a = fit.subject_index(subject)
+    cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants)
+    p = mdl.unpack(jnp.asarray(fit.params[a]), cfg)
+    return mdl.model_and_planner(fit.chain, p, jnp.asarray(duration, float), cfg), cfg
+

@@ -1,0 +1,192 @@
+"""The λ0-PMP of one subject on any chain, on normalised time: parameters, simulation, residuals.
+
+**Parameters** (one subject's, shared by all its reaches; ``n`` joints):
+- ``KJ`` SPD with ``tr KJ = n`` Nm/rad (``n(n+1)/2 − 1`` numbers, ``fitting.stiffness_from_params``;
+  with ``W ∝ KJ`` only its shape matters) and ``q_rest`` (n) [rad];
+- damping ``W = τ0 W̃``: ``"tau0_KJ"`` the paper's ``W̃ = KJ`` (Eq 7), ``"diagonal"`` (n − 1 log
+  ratios) or ``"full"`` (SPD, trace n);
+- the planner: ``"lambda0"`` Arimoto (Eq 8) with ``k = b_max/τ0`` (Eq 10) at each reach's start;
+  ``"lambda0_minjerk"`` the minimum-jerk time-base generator over ``d`` of the reach;
+- time constants ``log τ``, ``log τ0`` (time-base generator: ``log d``, ``log τ0``), in seconds
+  (``time_constants="seconds"``: the same τ, τ0 for reaches of every duration) or as fractions of
+  each reach's duration (``"fractions"``);
+- Arimoto's ``delay`` (same unit): how long before the window's start (the rest detected before
+  the onset) the target appeared; Eq 8's gain rises as ``t²`` at first, so the hand's speed
+  reaches the detection threshold tens of milliseconds after the target's onset.
+
+**Normalised time.** Every reach (from rest before its onset to rest after its offset, duration
+``T``) is integrated on ``s ∈ [0, 1]`` with time constants divided by ``T`` (so reaches of every
+length share one compiled simulation).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+
+import pmpjax as pj
+
+from .._optimise import log_stiffness, params_from_stiffness_jax, spd_size, stiffness_from_params
+from .data import SAMPLE_TIMES, SAMPLES
+
+MODELS = ("lambda0", "lambda0_minjerk")
+DAMPINGS = ("tau0_KJ", "diagonal", "full")
+TIME_CONSTANTS = ("seconds", "fractions")
+GAIN_CAP = 60.0  # time-base generator's task-velocity cap [1 / reach duration]
+FINAL_WEIGHT = 1.0
+#: Bounds (smooth softplus penalties, as ``fit_reaching``): cond(KJ) and the rest angles within
+#: the recorded range widened by ``REST_MARGIN_DEG``.
+STIFFNESS_COND_MAX = 100.0
+REST_MARGIN_DEG = 20.0
+BOUND_WEIGHT = 30.0
+BOUND_WIDTH = (0.02, 0.01)
+#: Starting time constants: τ = τ0 = 0.1 s, or T/5 as fractions (the paper's heuristic).
+START_SECONDS = 0.1
+START_FRACTION = 0.2
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    n: int
+    model: str
+    damping: str
+    time_constants: str
+    cond_max: float = STIFFNESS_COND_MAX
+    ftol: float = 1e-8
+    xtol: float = 1e-8
+    stol: float = 1e-4
+
+
+def n_stiffness(cfg: Config) -> int:
+    return spd_size(cfg.n)
+
+
+def n_postural(cfg: Config) -> int:
+    return spd_size(cfg.n) + cfg.n
+
+
+def n_params(cfg: Config) -> int:
+    extra = {"tau0_KJ": 0, "diagonal": cfg.n - 1, "full": spd_size(cfg.n)}[cfg.damping]
+    return n_postural(cfg) + extra + (3 if cfg.model == "lambda0" else 2)
+
+
+def param_names(cfg: Config, joints: tuple[str, ...]) -> tuple[str, ...]:
+    from .._optimise import sym_index
+
+    pairs = sym_index(cfg.n)
+    names = tuple(f"S_K[{joints[i]},{joints[j]}]" for i, j in pairs)
+    names += tuple(f"q_rest[{j}]" for j in joints)
+    if cfg.damping == "diagonal":
+        names += tuple(f"log W[{joints[j]}]/W[{joints[0]}]" for j in range(1, cfg.n))
+    elif cfg.damping == "full":
+        names += tuple(f"S_W[{joints[i]},{joints[j]}]" for i, j in pairs)
+    unit = "s" if cfg.time_constants == "seconds" else "T"
+    names += ((f"log(tau/{unit})",) if cfg.model == "lambda0" else ("log(duration/T)",)) + (f"log(tau0/{unit})",)
+    if cfg.model == "lambda0":
+        names += ("delay [s]" if cfg.time_constants == "seconds" else "delay/T",)
+    return names
+
+
+def unpack(theta, cfg: Config) -> dict:
+    """Parameters (p,) -> ``KJ`` (n, n), ``q_rest`` (n,), ``W`` (n, n) per unit τ0, ``a`` (τ, or the
+    generator's duration fraction) and ``a0`` (τ0), in seconds or fractions as ``cfg`` says."""
+    n, k = cfg.n, spd_size(cfg.n)
+    KJ = stiffness_from_params(theta[:k], n, float(n))
+    out = dict(KJ=KJ, q_rest=theta[k:k + n])
+    k += n
+    if cfg.damping == "tau0_KJ":
+        out["W"] = KJ
+    elif cfg.damping == "diagonal":
+        e = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[k:k + n - 1]]))
+        out["W"] = jnp.diag(n * e / jnp.sum(e))
+        k += n - 1
+    else:
+        out["W"] = stiffness_from_params(theta[k:k + spd_size(n)], n, float(n))
+        k += spd_size(n)
+    out["a"], out["a0"] = jnp.exp(theta[k]), jnp.exp(theta[k + 1])
+    out["delay"] = theta[k + 2] if cfg.model == "lambda0" else jnp.zeros((), theta.dtype)
+    return out
+
+
+def stage2_start(theta1, cfg: Config):
+    """Stage-2 start from the stage-1 postural parameters: ``W̃`` at ``KJ`` (``"full"``) or
+    ``diag KJ`` (``"diagonal"``), time constants at ``START_SECONDS`` / ``START_FRACTION`` (the
+    time-base generator's duration at the whole reach)."""
+    KJ = stiffness_from_params(theta1[:spd_size(cfg.n)], cfg.n, float(cfg.n))
+    parts = [theta1]
+    if cfg.damping == "diagonal":
+        d = jnp.log(jnp.diag(KJ))
+        parts.append(d[1:] - d[0])
+    elif cfg.damping == "full":
+        parts.append(params_from_stiffness_jax(KJ))
+    t0 = math.log(START_SECONDS if cfg.time_constants == "seconds" else START_FRACTION)
+    first = 0.0 if cfg.model == "lambda0_minjerk" else t0
+    parts.append(jnp.array([first, t0] + ([0.0] if cfg.model == "lambda0" else []), theta1.dtype))
+    return jnp.concatenate(parts)
+
+
+def model_and_planner(chain, p: dict, duration, cfg: Config):
+    """λ0-PMP and planner of reaches of ``duration`` (B,) [s] on normalised time."""
+    scale = 1.0 / duration if cfg.time_constants == "seconds" else jnp.ones_like(duration)
+    tau0 = p["a0"] * scale
+    W = tau0[:, None, None] * p["W"][None]
+    model = pj.Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=W)
+    if cfg.model == "lambda0":
+        planner = pj.ArimotoPlanner(k=None, tau=p["a"] * scale, tau0=tau0, delay=p["delay"] * scale)
+    else:
+        d = p["a"] * (jnp.ones_like(duration) if cfg.time_constants == "fractions" else scale)
+        planner = pj.MinimumJerkPlanner(duration=jnp.minimum(d, 1.0), gain_cap=GAIN_CAP)
+    return model, planner
+
+
+def simulate(chain, model, planner, q0, target, steps: int, solver: str):
+    """``pmpjax.simulate`` on normalised time, saved at the ``SAMPLES`` samples."""
+    return pj.simulate(model, planner, q0, target, duration=1.0, dt=1.0 / ((SAMPLES - 1) * steps),
+                       saveat=pj.SaveAt(ts=SAMPLE_TIMES), solver=solver)
+
+
+def bound_residual(theta, data, cfg: Config):
+    """Bounds as residuals (1 + n,): ``log cond(KJ)`` above ``log cond_max`` and the rest angles
+    outside the recorded range ± ``REST_MARGIN_DEG``, through softplus hinges."""
+    hinge = lambda g, width: width * jax.nn.softplus(g / width)  # noqa: E731
+    k = spd_size(cfg.n)
+    w = jnp.linalg.eigvalsh(log_stiffness(theta[:k], cfg.n))
+    over_c = hinge(w[-1] - w[0] - math.log(cfg.cond_max), BOUND_WIDTH[0])
+    q = theta[k:k + cfg.n]
+    over_q = hinge(q - data["hi"], BOUND_WIDTH[1]) + hinge(data["lo"] - q, BOUND_WIDTH[1])
+    return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])
+
+
+def final_residual(theta, data, chain, cfg: Config):
+    """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·n,) [rad] through the λ0-PMP's equilibria (Donders' law),
+    then the bounds."""
+    weight = data["weight"]
+    k = spd_size(cfg.n)
+    KJ = stiffness_from_params(theta[:k], cfg.n, float(cfg.n))
+    q_fin = data["q_end"]
+    eq = pj.equilibrium_posture(chain, KJ, theta[k:k + cfg.n], data["target"], q_init=q_fin)
+    used = (weight > 0)[:, None]
+    r = jnp.where(used, (eq.q - q_fin) * jnp.sqrt(weight)[:, None], 0.0)
+    r = jnp.where(eq.converged[:, None] | ~used, r, jnp.nan).reshape(-1)
+    return jnp.concatenate([r, bound_residual(theta, data, cfg)])
+
+
+def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str):
+    """Stage 2: per reach ``(q_sim − q_obs)(s_k) √(w/(S−1))``, k = 1..S−1, and the final posture
+    once more (``FINAL_WEIGHT``) (B·(S·n),) [rad], then the bounds. Failed simulations give NaN
+    (Levenberg–Marquardt rejects the step); ``INACCURATE`` ones are judged at the optimum."""
+    q_obs, weight = data["q_obs"], data["weight"]
+    p = unpack(theta, cfg)
+    model, planner = model_and_planner(chain, p, data["duration"], cfg)
+    traj = simulate(chain, model, planner, data["q_start"], data["target"], steps, solver)
+    sw = jnp.sqrt(weight)
+    d = traj.q - q_obs
+    r = jnp.concatenate([(d[:, 1:] * (sw / math.sqrt(SAMPLES - 1))[:, None, None]).reshape(d.shape[0], -1),
+                         d[:, -1] * (FINAL_WEIGHT * sw)[:, None]], axis=1)
+    used = weight > 0
+    r = jnp.where(used[:, None], r, 0.0)
+    good = (traj.status == int(pj.Status.SUCCESSFUL)) | (traj.status == int(pj.Status.INACCURATE)) | ~used
+    return jnp.concatenate([jnp.where(good[:, None], r, jnp.nan).reshape(-1), bound_residual(theta, data, cfg)])

@@ -1,0 +1,119 @@
+"""``predict_movements``: the fitted λ0-PMP's reaches against held-out recordings, with baselines.
+
+**Baselines** (same reaches, same run): ``pinv_minjerk`` a straight hand path with minimum-jerk
+timing resolved by the plain pseudo-inverse (PMP1 with ``W = I`` under the time-base generator:
+``q̇ = J# ẋ``); ``joint_minjerk_oracle`` joint-space minimum-jerk interpolation to the *recorded*
+final posture (exact end posture by construction: an upper bound for the path).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+import pmpjax as pj
+from pmpjax import Status
+
+from . import model as mdl
+from .data import SAMPLE_TIMES, SAMPLES, check_recordings, group_by_subject, subject_reaches
+from .fit import MovementFit, _fk, subject_model
+
+BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
+
+
+@dataclasses.dataclass(frozen=True)
+class MovementPrediction:
+    """One row per reach found in the held-out recordings (N rows, S = 50 samples, n joints).
+
+    ``subject``, ``recording`` (N,); ``t`` (N, S) [s] in the recording's own clock; ``q_obs``,
+    ``q_pred`` (N, S, n) [rad]; ``rmse_deg`` (N,) joint RMSE over the reach; ``final_error_deg``
+    (N,) RMS over joints of the final posture's error; ``status`` (N,) (``pmpjax.Status`` of the
+    simulation; NaN errors where it is not ``SUCCESSFUL``); ``baselines`` {name: dict of
+    ``q_pred``, ``rmse_deg``, ``final_error_deg``, ``status``}; ``skipped`` {recording:
+    [(t_from, t_to, reason)]}; ``problems`` {subject: message} (subjects not in the fit).
+    """
+
+    subject: np.ndarray
+    recording: np.ndarray
+    t: np.ndarray
+    q_obs: np.ndarray
+    q_pred: np.ndarray
+    rmse_deg: np.ndarray
+    final_error_deg: np.ndarray
+    status: np.ndarray
+    baselines: dict
+    skipped: dict
+    problems: dict
+
+    def __len__(self):
+        return int(self.rmse_deg.shape[0])
+
+
+def _errors(q_pred, q_obs, status):
+    d = np.rad2deg(q_pred - q_obs)
+    final = np.sqrt(np.mean(d[:, -1] ** 2, axis=-1))
+    rmse = np.sqrt(np.mean(d**2, axis=(1, 2)))
+    bad = status != int(Status.SUCCESSFUL)
+    return np.where(bad, np.nan, rmse), np.where(bad, np.nan, final)
+
+
+def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None = None) -> MovementPrediction:
+    """Predict every reach of held-out ``recordings`` with each subject's fitted λ0-PMP.
+
+    Each reach (found as in :func:`fit_movements`) is simulated from its recorded start posture to
+    the hand position of its recorded end, over its recorded duration, at the fit's solver and
+    step count. **Arguments:** ``fit`` a :class:`MovementFit`; ``recordings`` JointRecordings of
+    subjects in the fit (others are reported in ``problems``). **Returns:** a
+    :class:`MovementPrediction`. **Raises:** ``TypeError`` for a non-fit, ``ValueError`` when no
+    reach can be predicted.
+    """
+    if not isinstance(fit, MovementFit):
+        raise TypeError(f"`fit` must be a fitting.MovementFit (fitting.fit_movements), got {type(fit).__name__}")
+    chain = fit.chain
+    recordings = check_recordings(recordings, chain)
+    rows = {k: [] for k in ("subject", "recording", "t", "q_obs", "q_pred", "status")}
+    base = {b: {"q_pred": [], "status": []} for b in BASELINES}
+    skipped, problems = {}, {}
+    for subject, recs in group_by_subject(recordings).items():
+        if subject not in fit.subjects or not np.all(np.isfinite(fit.params[fit.subject_index(subject)])):
+            problems[subject] = f"{subject}: not fitted (subjects with parameters: {', '.join(fit.subjects)})"
+            continue
+        sr = subject_reaches(subject, recs, chain, dict(find_options or {}))
+        for rec, a, b, why in sr.skipped:
+            skipped.setdefault(rec, []).append((a, b, why))
+        if len(sr) == 0:
+            continue
+        (model, planner), _ = subject_model(fit, subject, sr.duration)
+        q0 = sr.q_start
+        target = np.asarray(_fk(chain, sr.q_end))
+        tr = mdl.simulate(chain, model, planner, q0, target, fit.steps_per_sample, fit.solver)
+        rows["q_pred"].append(np.asarray(tr.q))
+        rows["status"].append(np.asarray(tr.status).astype(int))
+        for k, v in (("subject", [subject] * len(sr)), ("recording", list(sr.recording)), ("t", sr.t),
+                     ("q_obs", sr.q_obs)):
+            rows[k].append(np.asarray(v))
+        tbg = pj.MinimumJerkPlanner(duration=1.0, gain_cap=mdl.GAIN_CAP)
+        pinv = pj.simulate(pj.PMP1(chain, W=np.eye(chain.n)), tbg, q0, target, duration=1.0,
+                           dt=1.0 / ((SAMPLES - 1) * 4), saveat=pj.SaveAt(ts=SAMPLE_TIMES))
+        base["pinv_minjerk"]["q_pred"].append(np.asarray(pinv.q))
+        base["pinv_minjerk"]["status"].append(np.asarray(pinv.status).astype(int))
+        s = np.asarray(SAMPLE_TIMES)
+        xi = 10 * s**3 - 15 * s**4 + 6 * s**5
+        base["joint_minjerk_oracle"]["q_pred"].append(q0[:, None] + (sr.q_end - q0)[:, None] * xi[None, :, None])
+        base["joint_minjerk_oracle"]["status"].append(np.zeros(len(sr), int))
+    if not rows["status"]:
+        raise ValueError("no reach of `recordings` could be predicted: " + "; ".join(
+            list(problems.values()) + [f"{r}: {len(v)} stretches skipped" for r, v in skipped.items()]))
+    cat = {k: np.concatenate(v) for k, v in rows.items()}
+    rmse, final = _errors(cat["q_pred"], cat["q_obs"], cat["status"])
+    baselines = {}
+    for b, d in base.items():
+        q = np.concatenate(d["q_pred"])
+        st = np.concatenate(d["status"])
+        r, f = _errors(q, cat["q_obs"], st)
+        baselines[b] = dict(q_pred=q, rmse_deg=r, final_error_deg=f, status=st)
+    return MovementPrediction(subject=cat["subject"], recording=cat["recording"], t=cat["t"], q_obs=cat["q_obs"],
+                              q_pred=cat["q_pred"], rmse_deg=rmse, final_error_deg=final, status=cat["status"],
+                              baselines=baselines, skipped=skipped, problems=problems)
+
