@@ -119,7 +119,7 @@ def _sweeps_in(ctx, store: Path) -> dict:
 
     anisotropy = np.array([0.5, 1.0, 2.0]) if ctx.quick else np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
     rest_ps = np.linspace(-15.0, 15.0, 3 if ctx.quick else 7)
-    cmap = sweep(functools.partial(curvature_row, dt=0.01), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
+    cmap = sweep(functools.partial(curvature_row, dt=0.005), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
                  chunk_size=16, out=store / "curvature", progress=False)
     a_net = cmap.outputs["A_net"].reshape(len(anisotropy), len(rest_ps), 8)
     fig = plot_curvature_map(anisotropy, rest_ps, a_net)

@@ -35,7 +35,7 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 from pmpjax.internal import fast_compile_jit
 
-from .._optimise import covariance, least_squares, spd_size
+from .._optimise import covariance, least_squares, lm_iterations, spd_size
 from . import model as mdl
 from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, subject_reaches
 
@@ -245,12 +245,7 @@ def fit_movements(
     _check_choice("model", model, mdl.MODELS)
     _check_choice("damping", damping, mdl.DAMPINGS)
     _check_choice("time_constants", time_constants, mdl.TIME_CONSTANTS)
-    try:
-        ms = tuple(int(v) for v in max_steps)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"`max_steps` must be a pair of integers, got {max_steps!r}") from e
-    if len(ms) != 2 or ms[0] < 1 or ms[1] < 0:
-        raise ValueError(f"`max_steps` must be (stage-1 >= 1, stage-2 >= 0) iterations, got {max_steps!r}")
+    ms = lm_iterations(max_steps)
     cond_max = math.inf if stiffness_cond_max is None else float(stiffness_cond_max)
     if not cond_max > 1.0:
         raise ValueError(f"`stiffness_cond_max` must be > 1 (or None), got {stiffness_cond_max!r}")

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 
 import pmpjax as pj
 
-from .._optimise import log_stiffness, params_from_stiffness_jax, spd_size, stiffness_from_params
+from .._optimise import damping_start, log_stiffness, spd_size, stiffness_from_params
 from .data import SAMPLE_TIMES, SAMPLES
 
 MODELS = ("lambda0", "lambda0_minjerk")
@@ -116,12 +116,7 @@ def stage2_start(theta1, cfg: Config):
     ``diag KJ`` (``"diagonal"``), time constants at ``START_SECONDS`` / ``START_FRACTION`` (the
     time-base generator's duration at the whole reach)."""
     KJ = stiffness_from_params(theta1[:spd_size(cfg.n)], cfg.n, float(cfg.n))
-    parts = [theta1]
-    if cfg.damping == "diagonal":
-        d = jnp.log(jnp.diag(KJ))
-        parts.append(d[1:] - d[0])
-    elif cfg.damping == "full":
-        parts.append(params_from_stiffness_jax(KJ))
+    parts = [theta1, damping_start(KJ, cfg.damping)]
     t0 = math.log(START_SECONDS if cfg.time_constants == "seconds" else START_FRACTION)
     first = 0.0 if cfg.model == "lambda0_minjerk" else t0
     parts.append(jnp.array([first, t0] + ([0.0] if cfg.model == "lambda0" else []), theta1.dtype))

@@ -3,6 +3,8 @@
 from .least_squares import LeastSquaresResult as LeastSquaresResult
 from .least_squares import covariance as covariance
 from .least_squares import least_squares as least_squares
+from .spd import damping_start as damping_start
+from .spd import lm_iterations as lm_iterations
 from .spd import log_stiffness as log_stiffness
 from .spd import params_from_stiffness as params_from_stiffness
 from .spd import params_from_stiffness_jax as params_from_stiffness_jax

@@ -95,3 +95,28 @@ def params_from_stiffness_jax(KJ):
     L = (V * jnp.log(w)[None, :]) @ V.T
     L = L - jnp.trace(L) / n * jnp.eye(n, dtype=KJ.dtype)
     return jnp.stack([L[i, j] for i, j in sym_index(n)])
+
+
+def damping_start(KJ, damping: str):
+    """Starting parameters of a free damping ``W̃`` at the stiffness ``KJ`` (n, n) (JAX):
+    ``"diagonal"`` the n − 1 log ratios of ``diag KJ`` to its first entry, ``"full"``
+    :func:`params_from_stiffness_jax` (``W̃ = KJ``: the paper's Eq 7 inside the free model), and
+    nothing for ``"tau0_KJ"``."""
+    if damping == "diagonal":
+        d = jnp.log(jnp.diag(KJ))
+        return d[1:] - d[0]
+    if damping == "full":
+        return params_from_stiffness_jax(KJ)
+    return jnp.zeros((0,), KJ.dtype)
+
+
+def lm_iterations(max_steps) -> tuple[int, int]:
+    """``max_steps`` of a two-stage fit as ``(stage 1 >= 1, stage 2 >= 0)`` Levenberg–Marquardt
+    iterations; ``TypeError``/``ValueError`` naming the argument otherwise."""
+    try:
+        ms = tuple(int(v) for v in max_steps)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"`max_steps` must be a pair of integers, got {max_steps!r}") from e
+    if len(ms) != 2 or ms[0] < 1 or ms[1] < 0:
+        raise ValueError(f"`max_steps` must be (stage-1 >= 1, stage-2 >= 0) LM iterations, got {max_steps!r}")
+    return ms

@@ -40,7 +40,7 @@ from pmpjax.internal import fast_compile_jit
 
 from .._ik.analysis import overspecified_joints
 from .._ik.weights import estimate_ik_weights
-from .._optimise import covariance, least_squares
+from .._optimise import covariance, least_squares, lm_iterations
 from .model import (
     _N_K,
     _N_P,
@@ -444,12 +444,7 @@ def fit_reaching(
     _check_choice("model", model, MODELS)
     _check_choice("damping", damping, DAMPINGS)
     _check_choice("time_constants", time_constants, TIME_CONSTANTS)
-    try:
-        ms = tuple(int(v) for v in max_steps)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"`max_steps` must be a pair of integers, got {max_steps!r}") from e
-    if len(ms) != 2 or ms[0] < 1 or ms[1] < 0:
-        raise ValueError(f"`max_steps` must be (stage-1 >= 1, stage-2 >= 0) LM iterations, got {max_steps!r}")
+    ms = lm_iterations(max_steps)
     if steps_per_sample is not None:
         if isinstance(steps_per_sample, bool) or int(steps_per_sample) != steps_per_sample or steps_per_sample < 1:
             raise ValueError(f"`steps_per_sample` must be a positive integer, got {steps_per_sample!r}")

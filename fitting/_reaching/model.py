@@ -45,7 +45,7 @@ import numpy as np
 import pmpjax as pj
 from pmpjax.internal import fast_compile_jit, row_chunks
 
-from .._optimise import log_stiffness, params_from_stiffness_jax, stiffness_from_params, sym_index
+from .._optimise import damping_start, log_stiffness, stiffness_from_params, sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
 MAX_STEPS_PER_SAMPLE = 160  # RK4 steps per 1/49 of normalised time (7840 per movement)
@@ -139,12 +139,7 @@ def _stage2_start(theta1, cfg: _Config):
     """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` (``"full"``: the
     paper's model) or at ``diag KJ`` (``"diagonal"``), time constants at their tied values."""
     KJ = stiffness_from_params(theta1[:_N_K], 4, 4.0)
-    parts = [theta1]
-    if cfg.damping == "diagonal":
-        d = jnp.log(jnp.diag(KJ))
-        parts.append(d[1:] - d[0])
-    elif cfg.damping == "full":
-        parts.append(params_from_stiffness_jax(KJ))
+    parts = [theta1, damping_start(KJ, cfg.damping)]
     if cfg.time_constants == "fitted":
         first = 0.0 if cfg.model == "lambda0_minjerk" else math.log(0.2)
         parts.append(jnp.array([first, math.log(0.2)], theta1.dtype))
