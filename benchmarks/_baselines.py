@@ -323,6 +323,126 @@ def best_of(fn, repeats: int, min_total: float = 0.0):
     return min(times)
 
 
+def _thread_ticks() -> dict:
+    """CPU clock ticks (user + system) of every thread of this process, by thread id (Linux)."""
+    out = {}
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                with open(f"/proc/self/task/{tid}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+                out[tid] = int(fields[11]) + int(fields[12])  # utime, stime
+            except (OSError, IndexError, ValueError):
+                pass
+    except OSError:
+        pass
+    return out
+
+
+class CpuClock:
+    """Wall and process CPU time (every thread of this process) of a ``with`` block; ``cores`` =
+    CPU / wall, the mean number of cores the block kept busy (on an idle machine; other load
+    lowers it); ``thread_cpu``: CPU time of the calling thread alone; ``threads``: how many
+    threads did at least 5 % of the block's CPU work (from ``/proc``, whatever the load)."""
+
+    def __enter__(self):
+        self._ticks = _thread_ticks()
+        self.wall, self.cpu, self.thread_cpu = time.perf_counter(), time.process_time(), time.thread_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall, self.cpu = time.perf_counter() - self.wall, time.process_time() - self.cpu
+        self.thread_cpu = time.thread_time() - self.thread_cpu  # the calling thread alone
+        self.cores = self.cpu / self.wall if self.wall > 0 else float("nan")
+        after = _thread_ticks()
+        d = [after[t] - self._ticks.get(t, 0) for t in after]
+        total = sum(d)
+        self.threads = sum(1 for v in d if total > 0 and v >= 0.05 * total)
+        return False
+
+
+def _openblas_threads() -> dict:
+    """Thread count of every OpenBLAS loaded in this process (NumPy's and SciPy's), through its
+    ``*_get_num_threads`` symbol (what ``threadpoolctl`` reads)."""
+    import ctypes
+
+    out = {}
+    try:
+        with open("/proc/self/maps") as f:
+            libs = sorted({line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line})
+    except OSError:
+        return out
+    for path in libs:
+        lib = ctypes.CDLL(path)
+        for sym in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
+                    "openblas_get_num_threads64_", "openblas_get_num_threads"):
+            if hasattr(lib, sym):
+                out[os.path.basename(path)] = int(getattr(lib, sym)())
+                break
+    return out
+
+
+def threads_report() -> dict:
+    """The thread pools either side may use: cores available to this process, BLAS (threadpoolctl
+    if installed, else NumPy's build configuration and the OpenBLAS thread counts), the thread
+    environment variables, and XLA's CPU devices."""
+    import numpy
+
+    rep = {"cpu_count": os.cpu_count(), "affinity": len(os.sched_getaffinity(0)),
+           "env": {k: os.environ[k] for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                               "XLA_FLAGS") if k in os.environ}}
+    try:
+        from threadpoolctl import threadpool_info
+
+        rep["blas"] = [{k: d.get(k) for k in ("internal_api", "version", "num_threads", "filepath")}
+                       for d in threadpool_info()]
+    except ImportError:
+        blas = numpy.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        rep["blas"] = {"numpy_blas": f"{blas.get('name')} {blas.get('version')}",
+                       "openblas_configuration": blas.get("openblas configuration"),
+                       "openblas_threads": _openblas_threads(), "threadpoolctl": "not installed"}
+    try:
+        import jax
+
+        rep["xla"] = {"devices": [str(d) for d in jax.devices()], "backend": jax.default_backend()}
+    except ImportError:
+        pass
+    return rep
+
+
+_COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
+                   "/jax/core/compile/backend_compile_duration")
+_SPANS: list = []
+
+
+def _span_listener(event, start, end, **_):
+    if event in _COMPILE_EVENTS:
+        _SPANS.append((start, end))
+
+
+def watch_compiles() -> None:
+    """Record JAX's tracing, lowering and XLA compilation time spans (``jax.monitoring``), once."""
+    import jax
+
+    if not getattr(watch_compiles, "done", False):
+        jax.monitoring.register_event_time_span_listener(_span_listener)
+        watch_compiles.done = True
+
+
+def compile_seconds(since: float) -> float:
+    """Union of the tracing/lowering/compilation time spans that started after ``since``
+    (``time.time()``; nested traces counted once). Needs :func:`watch_compiles` first."""
+    spans = sorted(s for s in _SPANS if s[0] >= since)
+    total, cur = 0.0, None
+    for a, b in spans:
+        if cur is None or a > cur[1]:
+            total += 0.0 if cur is None else cur[1] - cur[0]
+            cur = [a, b]
+        else:
+            cur[1] = max(cur[1], b)
+    return total + (0.0 if cur is None else cur[1] - cur[0])
+
+
 def machine() -> str:
     try:
         with open("/proc/cpuinfo") as f:

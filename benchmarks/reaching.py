@@ -7,14 +7,28 @@ loop, and the held-out table of every model variant against the baselines.
    it picks), one public call. Compile time is the union of the time spans JAX reports through
    ``jax.monitoring`` for tracing, lowering and XLA compilation during that call; a second call
    with the same shapes gives the run time alone. Against it, on ONE subject (the one with the
-   fewest motions) in the same process: ``scipy.optimize.least_squares`` (2-point Jacobian,
+   fewest motions, S01) in the same process: ``scipy.optimize.least_squares`` (2-point Jacobian,
    ``method="lm"``) around ``scipy.integrate.solve_ivp`` (LSODA, rtol 1e-6, atol 1e-9) of an
    independent NumPy λ0-PMP on normalised time (the data README's arm formula, design §3.1, Eqs
    3–10), the same residual (49 time-normalised samples / √49 and the final posture per motion).
-   The SciPy loop is capped at ``--scipy-nfev`` residual calls and extrapolated as (seconds per
-   call) × (p + 1) × (the JAX fit's stage-2 LM iterations of that subject): a lower bound (no
-   rejected steps, no stage 1). Same computation: NumPy's cost at the JAX optimum against the JAX
-   fit's data cost.
+   The NumPy model is written as a careful SciPy user would: the arm's hand position and Jacobian
+   in closed form (each sine and cosine once per call, scalar arithmetic, no rotation matrices),
+   the field with ``W⁻¹`` formed once per motion and one 3×3 ``solve`` and four small products
+   per call. The SciPy loop is capped at ``--scipy-nfev`` residual calls and extrapolated as
+   (seconds per call) × (p + 1) × (the JAX fit's stage-2 LM iterations of that subject): a lower
+   bound (no rejected steps, no stage 1). The one-subject fit is timed in ``--rounds`` rounds,
+   each followed by one residual call of the baseline and one of the slow reference (below), so
+   that both sides see the same load; the fastest of each counts.
+   **Checks**: NumPy's cost at the JAX optimum against the JAX fit's data cost; the baseline
+   against a slow reference, the same model written literally (rotation-matrix products and their
+   derivatives on every call, more small products in the field): the fields agree to ~1e-12
+   (relative; asserted < 1e-10) at every recorded sample and the residuals to ~3e-11 (asserted
+   < 1e-9) with solve_ivp's tolerances tightened to 1e-11 / 1e-13 (at the baseline's own
+   tolerances LSODA's adaptive step choices differ: ~1e-8); the slow reference's cost gives the
+   ratio a slowly written baseline reports.
+   **Cores**: process CPU time / wall of each side and the threads that did ≥ 5 % of its CPU
+   work (``/proc``); the JSON's ``threads`` lists BLAS (OpenBLAS thread counts, or
+   ``threadpoolctl``'s report when installed) and XLA's devices.
 2. **Held-out table** (``--table``): every variant of ``fit_reaching`` — planner (``lambda0``,
    ``lambda0_minjerk``) × damping (``tau0_KJ``, ``diagonal``, ``full``) × time constants (``tied``,
    ``fitted``), defaults otherwise — and the Donders-only model (stage 1 alone) on the four
@@ -27,26 +41,44 @@ loop, and the held-out table of every model variant against the baselines.
    (``fitting/data/reaching_variants.json``).
 
 ``--quick``: one subject, task 1, repetitions 1–2, 3 + 2 LM iterations, 2 SciPy calls; writes
-nothing. Usage: ``python benchmarks/reaching.py [--quick] [--table [--variants ...] [--subjects ...]
-[--max-steps 100 100] [--name NAME]]``.
+nothing. Usage: ``python benchmarks/reaching.py [--quick] [--subjects 1 ...] [--rounds 2]
+[--scipy-nfev 3] [--max-steps 100 100] [--table [--variants ...] [--name NAME]]``; the fit cost
+writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
-Latest figures (2026-12-05, 2-core AMD EPYC Zen 4 KVM, no GPU, jax 0.10.2, float64).
+Latest figures (2026-12-05, 2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64; library
+at 5e331bd).
 
-Fit cost (17:15 UTC, idle; defaults: ``max_steps=(100, 100)``, fitted time constants)::
+Fit cost (the run of 00:39–00:43 UTC on the 6th; load average 0.6 at the start, 2.0 with the
+benchmark itself at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
+``--rounds 3``)::
 
-    | | compile [s] | run [s] | per subject [s] |
-    |---|---:|---:|---:|
-    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 24 | 50 | 12.4 |
-    | fit_reaching, S01 alone (24 stage-2 iterations) | — | 11.0 | 11.0 |
-    | SciPy loop, S01 (1.6 s per residual × 15 × 24 iterations, extrapolated) | — | — | 568 |
+    | | compile [s] | run [s] | per subject [s] | cores |
+    |---|---:|---:|---:|---:|
+    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 28 | 56 | 13.9 | 1.64 |
+    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3: 11.4–11.7 s) | — | 11.4 | 11.4 | 1.68 |
+    | SciPy loop, S01 (0.61 s per residual × 15 × 24 iterations, extrapolated) | — | — | 221 | 1.00 |
+    | slow reference SciPy loop, S01 (1.59 s per residual, extrapolated) | — | — | 573 | 1.00 |
 
-    S01: SciPy loop / fit_reaching 52× (target 50×); per subject of the 4-subject call 46×, 30×
-    with compilation. NumPy cost at the JAX optimum 3.9073, JAX 3.9073. Every subject converged;
-    integration error at the optimum ≤ 0.0001°.
+    S01: SciPy loop / fit_reaching 19× (target 50×: not met); per subject of the 4-subject call
+    16×, 10× with compilation; 11.5× in CPU time (19 CPU-s against 221). The slow reference
+    would report 50×. Per call: arm kinematics 2.2 µs closed form against 31 µs by rotation
+    matrices, the field 13 µs against 44 µs. NumPy cost at the JAX optimum 3.9073, JAX 3.9073;
+    closed form against the slow reference: fields 1.2e-12 (relative), residuals 2e-11 at the
+    tight tolerances, 6e-8 at the baseline's. Every subject converged; integration error at the
+    optimum ≤ 0.0001°.
 
-Held-out table (16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12 variants + the
-Donders-only model; ``results/reaching_table.md``): every fit of every variant converged on all
-four subjects. Pooled median held-out RMSE [deg]: Donders-only 15.1; Arimoto planner tied
+    Cores: the SciPy loop runs on one thread (its thread 1.00 core; the process 1.16, other
+    threads of the process busy meanwhile); fit_reaching keeps 1.64–1.68 cores busy with 3
+    threads (XLA's CPU client, one device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads
+    but 3×4 products and 3×3 solves stay on the calling thread; ``OPENBLAS_NUM_THREADS=1`` does
+    not change the baseline's time. The JAX side's run time varies with the machine's other work
+    far more than the SciPy loop's: over four full runs that night (00:09–00:43 UTC; the first
+    three with the library at 39fb886) S01 alone took 10.9–16.6 s and a residual call 0.61–0.66
+    s: 14–21×.
+
+Held-out table (2026-12-05 16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12
+variants + the Donders-only model; ``results/reaching_table.md``): every fit of every variant
+converged on all four subjects. Pooled median held-out RMSE [deg]: Donders-only 15.1; Arimoto planner tied
 (``tau0_KJ``/diagonal/full) 8.9/13.2/8.5, fitted 5.9/7.1/5.6; time-base generator tied 5.6/5.6/5.6,
 fitted 5.3/5.3/5.3; pinv_minjerk 7.5, ik_weights_minjerk 9.9, unfitted λ0-PMP 13.6, joint-space
 oracle 5.6. Verdict: the fitted-time-constant Arimoto variants and every time-base-generator
@@ -60,6 +92,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -71,6 +104,7 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 import scipy.integrate  # noqa: E402
+import scipy.linalg  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -99,6 +133,95 @@ def log(msg):
 L1, L2 = 0.30, 0.33  # data README (pmpjax.ShoulderElbowArm defaults)
 
 
+def arm(q):
+    """Hand position (3,) and Jacobian (3, 4) of ``p = Rx(q1) Ry(q2) Rz(−q3) ([0,0,−L1] +
+    Ry(−q4) [0,0,−L2])`` (the data README's formula) in closed form: each sine and cosine once,
+    the product expanded from the right (``v`` elbow-to-hand in the upper-arm frame, ``u`` after
+    ``Ry(q2) Rz(−q3)``; ``∂/∂q3``, ``∂/∂q4`` the same chain with ``v``'s derivatives)."""
+    q1, q2, q3, q4 = q.tolist()
+    s1, c1, s2, c2 = math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2)
+    s3, c3, s4, c4 = math.sin(q3), math.cos(q3), math.sin(q4), math.cos(q4)
+    v0, v2 = L2 * s4, -L1 - L2 * c4
+    u0, u1, u2 = c2 * c3 * v0 + s2 * v2, -s3 * v0, c2 * v2 - s2 * c3 * v0
+    p1, p2 = c1 * u1 - s1 * u2, s1 * u1 + c1 * u2
+    a0, a1, a2 = -c2 * s3 * v0, -c3 * v0, s2 * s3 * v0  # Ry Rz' v
+    w0, w2 = L2 * c4, L2 * s4  # ∂v/∂q4
+    b0, b1, b2 = c2 * c3 * w0 + s2 * w2, -s3 * w0, c2 * w2 - s2 * c3 * w0
+    return np.array([u0, p1, p2]), np.array([[0.0, u2, a0, b0],
+                                             [-p2, s1 * u0, c1 * a1 - s1 * a2, c1 * b1 - s1 * b2],
+                                             [p1, -c1 * u0, s1 * a1 + c1 * a2, s1 * b1 + c1 * b2]])
+
+
+def stiffness_np(s):
+    """``4 expm(S)/tr expm(S)`` with S traceless symmetric: diagonal s0..s2, then the upper triangle."""
+    S = np.zeros((4, 4))
+    S[[0, 1, 2], [0, 1, 2]] = s[:3]
+    S[3, 3] = -np.sum(s[:3])
+    iu, ju = np.triu_indices(4, 1)
+    S[iu, ju] = S[ju, iu] = s[3:9]
+    E = scipy.linalg.expm(S)
+    return 4.0 * E / np.trace(E)
+
+
+def field_np(q0, target, KJ, q_rest, tau, tau0):
+    """The λ0-PMP field ``rhs(s, q)`` (``W = τ0 KJ``, Arimoto with Eq 10's gain) on normalised time.
+    With ``A = W⁻¹``, ``g = A τ_el = (q − q_rest)/τ0`` and ``P = A Jᵀ``: ``q̇ = P (F + λ0) − g``,
+    ``λ0 = (J P)⁻¹ J g`` (one 3×3 solve), ``F = K(s) (x_d − x)``."""
+    A = np.linalg.inv(tau0 * KJ)  # once per motion
+    _, J0 = arm(q0)
+    k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)
+    itau, itau0 = 1.0 / tau, 1.0 / tau0
+    exp = math.exp
+
+    def rhs(t, q):
+        x, J = arm(q)
+        s = t * itau
+        g = (q - q_rest) * itau0
+        P = A @ J.T
+        lam0 = np.linalg.solve(J @ P, J @ g)
+        return P @ ((k * (1.0 - (1.0 + s) * exp(-s))) * (target - x) + lam0) - g
+
+    return rhs
+
+
+#: solve_ivp's tolerances of the baseline (and of the first one)
+TOL = dict(rtol=1e-6, atol=1e-9)
+
+
+def movement_np(q0, target, KJ, q_rest, tau, tau0, n=50, tol=TOL, field=field_np):
+    """λ0-PMP on normalised time s ∈ [0, 1] by ``solve_ivp`` (LSODA): q at n samples."""
+    rhs = field(q0, target, KJ, q_rest, tau, tau0)
+    s = np.linspace(0.0, 1.0, n)
+    sol = scipy.integrate.solve_ivp(rhs, (0.0, 1.0), q0, method="LSODA", t_eval=s, **tol)
+    if not sol.success or sol.y.shape[1] != n:
+        return np.full((n, 4), np.nan)
+    return sol.y.T
+
+
+def residual_np(theta, q_obs, t_ratio, elbow, *, arm=arm, movement=movement_np, stiffness=stiffness_np, tol=TOL):
+    """The fit's stage-2 residual (``W = τ0 KJ``; ``τ = τ0 = T/5`` for 12 parameters, fitted
+    ``log τ/T, log τ0/T`` for 14): per motion ``(q − q_obs)(s_k)/√49``, k = 1..49, then
+    ``(q − q_obs)(1)`` [rad]. ``arm``, ``movement``, ``stiffness``: the closed-form baseline, or
+    the slow reference (``**SLOW``) for the check that both give the same residual; ``tol``:
+    solve_ivp's tolerances."""
+    KJ = stiffness(theta[:9])
+    q_rest = np.append(theta[9:12], elbow)
+    a, a0 = (np.exp(theta[12]), np.exp(theta[13])) if len(theta) == 14 else (0.2, 0.2)
+    out = []
+    for qo, tr in zip(q_obs, t_ratio):
+        x_d, _ = arm(qo[-1])
+        q = movement(qo[0], x_d, KJ, q_rest, a * tr, a0 * tr, qo.shape[0], tol)
+        d = q - qo
+        out += [d[1:].ravel() / np.sqrt(qo.shape[0] - 1), d[-1]]
+    r = np.concatenate(out)
+    return np.where(np.isfinite(r), r, 1e3)
+
+
+# The slow reference: the same model written literally (generic rotation-matrix products and their
+# derivatives on every call, more small products in the field). It checks that the closed form
+# computes the same residual, and gives the cost a slowly written baseline would report.
+
+
 def _rot(axis, t):
     c, s = np.cos(t), np.sin(t)
     R = {0: [[1, 0, 0], [0, c, -s], [0, s, c]], 1: [[c, 0, s], [0, 1, 0], [-s, 0, c]],
@@ -108,9 +231,8 @@ def _rot(axis, t):
     return np.array(R, float), np.array(dR, float)
 
 
-def arm(q):
-    """Hand position (3,) and Jacobian (3, 4) of ``p = Rx(q1) Ry(q2) Rz(−q3) ([0,0,−L1] +
-    Ry(−q4) [0,0,−L2])`` (the data README's formula, derivatives by the product rule)."""
+def arm_rot(q):
+    """:func:`arm` by rotation-matrix products (derivatives by the product rule)."""
     (A, dA), (B, dB), (C, dC), (D, dD) = _rot(0, q[0]), _rot(1, q[1]), _rot(2, -q[2]), _rot(1, -q[3])
     u = np.array([0.0, 0.0, -L2])
     v = np.array([0.0, 0.0, -L1]) + D @ u
@@ -119,10 +241,7 @@ def arm(q):
     return A @ BCv, J
 
 
-def stiffness_np(s):
-    """``4 expm(S)/tr expm(S)`` with S traceless symmetric: diagonal s0..s2, then the upper triangle."""
-    import scipy.linalg
-
+def stiffness_rot(s):
     S = np.zeros((4, 4))
     S[[0, 1, 2], [0, 1, 2]] = s[:3]
     S[3, 3] = -np.sum(s[:3])
@@ -133,14 +252,13 @@ def stiffness_np(s):
     return 4.0 * E / np.trace(E)
 
 
-def movement_np(q0, target, KJ, q_rest, tau, tau0, n=50):
-    """λ0-PMP (``W = τ0 KJ``, Arimoto with Eq 10 gain) on normalised time s ∈ [0, 1]: q at n samples."""
+def field_rot(q0, target, KJ, q_rest, tau, tau0):
     A = np.linalg.inv(tau0 * KJ)
-    _, J0 = arm(q0)
+    _, J0 = arm_rot(q0)
     k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)
 
     def rhs(t, q):
-        x, J = arm(q)
+        x, J = arm_rot(q)
         s = t / tau
         F = k * (1.0 - (1.0 + s) * np.exp(-s)) * (target - x)
         tel = KJ @ (q - q_rest)
@@ -148,57 +266,31 @@ def movement_np(q0, target, KJ, q_rest, tau, tau0, n=50):
         lam0 = np.linalg.solve(JA @ J.T, JA @ tel)
         return A @ (J.T @ (F + lam0) - tel)
 
-    s = np.linspace(0.0, 1.0, n)
-    sol = scipy.integrate.solve_ivp(rhs, (0.0, 1.0), q0, method="LSODA", t_eval=s, rtol=1e-6, atol=1e-9)
-    if not sol.success or sol.y.shape[1] != n:
-        return np.full((n, 4), np.nan)
-    return sol.y.T
+    return rhs
 
 
-def residual_np(theta, q_obs, t_ratio, elbow):
-    """The fit's stage-2 residual (``W = τ0 KJ``; ``τ = τ0 = T/5`` for 12 parameters, fitted
-    ``log τ/T, log τ0/T`` for 14): per motion ``(q − q_obs)(s_k)/√49``, k = 1..49, then
-    ``(q − q_obs)(1)`` [rad]."""
-    KJ = stiffness_np(theta[:9])
-    q_rest = np.append(theta[9:12], elbow)
-    a, a0 = (np.exp(theta[12]), np.exp(theta[13])) if len(theta) == 14 else (0.2, 0.2)
-    out = []
-    for qo, tr in zip(q_obs, t_ratio):
-        x_d, _ = arm(qo[-1])
-        q = movement_np(qo[0], x_d, KJ, q_rest, a * tr, a0 * tr, qo.shape[0])
-        d = q - qo
-        out += [d[1:].ravel() / np.sqrt(qo.shape[0] - 1), d[-1]]
-    r = np.concatenate(out)
-    return np.where(np.isfinite(r), r, 1e3)
+def movement_rot(q0, target, KJ, q_rest, tau, tau0, n=50, tol=TOL):
+    return movement_np(q0, target, KJ, q_rest, tau, tau0, n, tol, field=field_rot)
+
+
+SLOW = dict(arm=arm_rot, movement=movement_rot, stiffness=stiffness_rot)
+
+
+def per_call_us(fn, *args, number=2000, repeats=7):
+    """Minimum over ``repeats`` of the mean µs per call of ``fn(*args)`` in ``number`` calls."""
+    best = math.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(number):
+            fn(*args)
+        best = min(best, (time.perf_counter() - t) / number)
+    return 1e6 * best
 
 
 # --- compile time from jax.monitoring ------------------------------------------------------------
 
-_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
-           "/jax/core/compile/backend_compile_duration")
-_SPANS: list = []
-
-
-def _listener(event, start, end, **_):
-    if event in _EVENTS:
-        _SPANS.append((start, end))
-
-
-jax.monitoring.register_event_time_span_listener(_listener)
-
-
-def compile_seconds(since: float) -> float:
-    """Union of the tracing/lowering/compilation time spans that started after ``since`` (nested
-    traces counted once)."""
-    spans = sorted(s for s in _SPANS if s[0] >= since)
-    total, cur = 0.0, None
-    for a, b in spans:
-        if cur is None or a > cur[1]:
-            total += 0.0 if cur is None else cur[1] - cur[0]
-            cur = [a, b]
-        else:
-            cur[1] = max(cur[1], b)
-    return total + (0.0 if cur is None else cur[1] - cur[0])
+bl.watch_compiles()
+compile_seconds = bl.compile_seconds
 
 
 def timed_fit(subjects, **kw):
@@ -447,58 +539,84 @@ class _Cap(Exception):
 def fit_cost(args):
     """The default fit of the bundled subjects (compile apart) against the SciPy loop on one
     subject, extrapolated from its seconds per residual call."""
-    subjects, kw = SUBJECTS, (dict(max_steps=tuple(args.max_steps)) if args.max_steps else {})
+    subjects, kw = tuple(args.subjects), (dict(max_steps=tuple(args.max_steps)) if args.max_steps else {})
     nfev = args.scipy_nfev
     if args.quick:
         subjects, kw, nfev = (2,), dict(reps=(1, 2), tasks=(1,), max_steps=(3, 2)), 2
     res = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), load_start=load(), machine=bl.machine(),
-               options={k: list(v) for k, v in kw.items()})
+               options={k: list(v) for k, v in kw.items()}, subjects=list(subjects))
     log(f"fit_reaching({list(subjects)}) {kw or 'defaults'} ...")
     fit, wall, comp = timed_fit(subjects, **kw)
     S = len(subjects)
     log(f"  {wall:.0f} s wall, {comp:.0f} s compile, status {fit.status.tolist()}, lm {fit.lm_steps.tolist()}, "
         f"{fit.solver} x{fit.steps_per_sample}")
     # a second call with the same shapes: everything compiled, the run alone
-    p0 = time.perf_counter()
-    fitting.fit_reaching(subjects, **kw)
-    warm = time.perf_counter() - p0
+    with bl.CpuClock() as clk_warm:
+        fitting.fit_reaching(subjects, **kw)
+    warm = clk_warm.wall
+    log(f"  run alone {warm:.0f} s")
     res["jax"] = dict(wall_s=wall, compile_s=comp, run_s=wall - comp, warm_s=warm, warm_s_per_subject=warm / S,
                       status=fit.status.tolist(), lm_steps=fit.lm_steps.tolist(), n_motions=fit.n_motions.tolist(),
                       loss=fit.loss.tolist(), solver=fit.solver, steps_per_sample=fit.steps_per_sample,
                       integration_error_deg=fit.integration_error_deg.tolist(), load=load(),
+                      cores_used_run=clk_warm.cores,
                       compile_method="union of jax.monitoring trace/lower/compile time spans inside the call")
 
     k = int(np.argmin(fit.n_motions))  # the subject with the fewest motions
     m = R._motions(fit.subjects[k], None, fit.reps, fit.tasks)
     p = len(fit.param_names)
     elbow = m.q_obs[:, -1, 3].mean()
-    # that subject alone (compiled, then timed): the JAX side of the per-subject comparison
-    one = subjects[k] if not args.quick else subjects[0]
-    fitting.fit_reaching([one], **kw)
-    p0 = time.perf_counter()
-    single = fitting.fit_reaching([one], **kw)
-    single_s = time.perf_counter() - p0
-    res["jax"].update(single_subject=fit.subjects[k], single_subject_s=single_s,
-                      single_subject_lm_steps=single.lm_steps[0].tolist())
-    log(f"SciPy loop on {m.subject} ({len(m)} motions, p = {p}), capped at {nfev} residual calls ...")
+    theta_star = np.asarray(fit.params[k], float)
+    log(f"SciPy baseline on {m.subject} ({len(m)} motions, p = {p}): checks against the slow reference ...")
+    sc = res["scipy"] = check_against_reference(theta_star, m, elbow)
+    log(f"SciPy loop on {m.subject}, capped at {nfev} residual calls ...")
     calls, costs = [], []
 
     def fun(theta):
         if len(calls) >= nfev:
             raise _Cap
-        t = time.perf_counter()
-        r = residual_np(theta, m.q_obs, m.t_ratio, elbow)
-        calls.append(time.perf_counter() - t)
+        with bl.CpuClock() as clk:
+            r = residual_np(theta, m.q_obs, m.t_ratio, elbow)
+        calls.append(clk)
         costs.append(0.5 * float(r @ r))
         return r
 
     try:  # the start and the first Jacobian columns: seconds per residual call
-        scipy.optimize.least_squares(fun, fit.params[k], method="lm", xtol=1e-8, ftol=1e-8)
+        scipy.optimize.least_squares(fun, theta_star, method="lm", xtol=1e-8, ftol=1e-8)
     except _Cap:
         pass
-    per_eval = float(np.median(calls))
+    # that subject alone (compiled), in rounds alternating with residual calls of the baseline and of
+    # the slow reference, so that both sides see the same load; the fastest of each counts
+    one = fit.subjects[k]
+    if S > 1:
+        fitting.fit_reaching([one], **kw)
+    jax_clocks, slow = [], []
+    for r in range(args.rounds):
+        log(f"round {r + 1}/{args.rounds}: fit_reaching([{one!r}]), a residual call of the baseline and of the "
+            "slow reference ...")
+        with bl.CpuClock() as clk:
+            single = fitting.fit_reaching([one], **kw)
+        jax_clocks.append(clk)
+        with bl.CpuClock() as clk:
+            residual_np(theta_star, m.q_obs, m.t_ratio, elbow)
+        calls.append(clk)
+        with bl.CpuClock() as clk:
+            residual_np(theta_star, m.q_obs, m.t_ratio, elbow, **SLOW)
+        slow.append(clk)
+    if S == 1:
+        jax_clocks.append(clk_warm)
+    clk_one = min(jax_clocks, key=lambda c: c.wall)
+    single_s, jax_cpu = clk_one.wall, clk_one.cpu
+    res["jax"].update(single_subject=one, single_subject_s=single_s, single_subject_cpu_s=jax_cpu,
+                      single_subject_cores_used=clk_one.cores, single_subject_runs_s=[c.wall for c in jax_clocks],
+                      single_subject_lm_steps=single.lm_steps[0].tolist())
+    per_eval = min(c.wall for c in calls)
+    cpu_per_eval = min(c.thread_cpu for c in calls)  # the loop's thread (others: the JAX runtime's)
+    per_slow = min(c.wall for c in slow)
     it = int(single.lm_steps[0][1])
     extrap = per_eval * (p + 1) * max(it, 1)
+    extrap_cpu = cpu_per_eval * (p + 1) * max(it, 1)
+    extrap_slow = per_slow * (p + 1) * max(it, 1)
     # the same computation: NumPy's cost at the JAX optimum against the JAX fit's data cost
     per = (R.SAMPLES - 1) * 4 + 4
     pred_rows = R._fit_motions([m], R._Config(fit.model, fit.damping, fit.time_constants, 5,
@@ -506,42 +624,106 @@ def fit_cost(args):
                                theta0=fit.params[k][None], max_steps=(1, 0), steps=fit.steps_per_sample,
                                solver=fit.solver)["residual"][0][: len(m) * per]
     jax_cost = 0.5 * float(pred_rows @ pred_rows)
-    res["scipy"] = dict(subject=m.subject, n_motions=len(m), p=p, residual_calls=len(calls),
-                        seconds_per_residual=per_eval, numpy_cost_at_jax_optimum=costs[0],
-                        jax_data_cost_at_jax_optimum=jax_cost, jax_lm_iterations=it, extrapolated_seconds=extrap,
-                        load=load(), integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9",
-                        optimiser="least_squares lm, 2-point Jacobian")
+    cores_scipy = sum(c.cpu for c in calls) / sum(c.wall for c in calls)
+    cores_scipy_loop = sum(c.thread_cpu for c in calls) / sum(c.wall for c in calls)
+    sc.update(subject=m.subject, n_motions=len(m), p=p, residual_calls=len(calls), seconds_per_residual=per_eval,
+              seconds_per_residual_all=[c.wall for c in calls], cpu_seconds_per_residual=cpu_per_eval,
+              seconds_per_residual_slow_reference=per_slow, slow_over_closed_form=per_slow / per_eval,
+              cores_used=cores_scipy, numpy_cost_at_jax_optimum=costs[0], jax_data_cost_at_jax_optimum=jax_cost,
+              jax_lm_iterations=it, extrapolated_seconds=extrap, extrapolated_cpu_seconds=extrap_cpu,
+              extrapolated_seconds_slow_reference=extrap_slow, load=load(),
+              integrator="solve_ivp LSODA rtol 1e-6 atol 1e-9", optimiser="least_squares lm, 2-point Jacobian")
+    res["threads"] = bl.threads_report()
+    res["cores_used"] = {  # process CPU time / wall, and threads that did ≥ 5 % of the CPU work
+        "scipy_loop": dict(cores=cores_scipy, cores_loop_thread=cores_scipy_loop,
+                           threads=max(c.threads for c in calls)),
+        f"fit_reaching, {m.subject} alone": dict(cores=clk_one.cores, threads=clk_one.threads),
+        f"fit_reaching, {S} subjects (run)": dict(cores=clk_warm.cores, threads=clk_warm.threads)}
     res["ratios"] = {f"{m.subject}: SciPy loop / fit_reaching (run)": extrap / single_s,
-                     "4 subjects: SciPy loop (extrapolated per subject) / fit_reaching per subject (run)":
-                         extrap / (warm / S),
-                     "4 subjects, compile included": extrap / (wall / S)}
+                     f"{m.subject}: SciPy loop / fit_reaching, CPU time": extrap_cpu / jax_cpu,
+                     f"{m.subject}: slow reference SciPy loop / fit_reaching (run)": extrap_slow / single_s}
+    if S > 1:
+        res["ratios"].update({
+            f"{S} subjects: SciPy loop (extrapolated per subject) / fit_reaching per subject (run)":
+                extrap / (warm / S),
+            f"{S} subjects, compile included": extrap / (wall / S)})
     res["targets"] = {f"{m.subject}: SciPy loop / fit_reaching (run)": 50.0}
     res["load_end"] = load()
-    print(f"\n| | compile [s] | run [s] | per subject [s] | load |\n|---|---:|---:|---:|---:|\n"
+    print(f"\n| | compile [s] | run [s] | per subject [s] | cores | load |\n|---|---:|---:|---:|---:|---:|\n"
           f"| fit_reaching, {S} subjects ({fit.solver} ×{fit.steps_per_sample}) | {comp:.0f} | {warm:.0f} | "
-          f"{warm / S:.1f} | {res['jax']['load']:.1f} |\n"
-          f"| fit_reaching, {m.subject} alone ({it} stage-2 iterations) | — | {single_s:.1f} | {single_s:.1f} | |\n"
-          f"| SciPy loop, {m.subject} (extrapolated: {per_eval:.1f} s × {p + 1} × {it} iterations) | — | — | "
-          f"{extrap:.0f} | {res['scipy']['load']:.1f} |\n")
+          f"{warm / S:.1f} | {clk_warm.cores:.2f} | {res['jax']['load']:.1f} |\n"
+          f"| fit_reaching, {m.subject} alone ({it} stage-2 iterations) | — | {single_s:.1f} | {single_s:.1f} | "
+          f"{clk_one.cores:.2f} | |\n"
+          f"| SciPy loop, {m.subject} (extrapolated: {per_eval:.2f} s × {p + 1} × {it} iterations) | — | — | "
+          f"{extrap:.0f} | {cores_scipy:.2f} | {sc['load']:.1f} |\n"
+          f"| slow reference SciPy loop ({per_slow:.2f} s per residual, {per_slow / per_eval:.2f}×) | — | — | "
+          f"{extrap_slow:.0f} | | |\n")
+    print(f"arm kinematics per call: closed form {sc['arm_us']['closed_form']:.1f} µs, slow reference "
+          f"{sc['arm_us']['slow_reference']:.1f} µs; field per call {sc['field_us']['closed_form']:.1f} µs vs "
+          f"{sc['field_us']['slow_reference']:.1f} µs")
+    print(f"closed form vs slow reference: field {sc['field_max_rel_diff']:.1e} (relative), residual "
+          f"{sc['residual_max_abs_diff_tight']:.1e} at rtol 1e-11 / atol 1e-13, "
+          f"{sc['residual_max_abs_diff']:.1e} at the baseline's tolerances (adaptive step choices)")
     print(f"NumPy cost at the JAX optimum {costs[0]:.6g}, JAX {jax_cost:.6g}")
     for name, v in res["ratios"].items():
-        print(f"{name}: {v:.0f}x")
+        print(f"{name}: {v:.1f}x")
     if not args.quick:
-        print(f"results -> {write_results('reaching', res)}")
+        name = args.name or ("reaching" if set(subjects) == set(SUBJECTS) else
+                             "reaching_" + "_".join(f"S{s:02d}" for s in subjects))
+        print(f"results -> {write_results(name, res)}")
     return res
+
+
+def check_against_reference(theta, m, elbow, *, tight=dict(rtol=1e-11, atol=1e-13)):
+    """The closed-form baseline against the slow reference at ``theta``: per-call µs of the arm
+    kinematics and of the field (at a recorded posture), the largest relative difference of the
+    field over every recorded sample, and the largest residual difference with solve_ivp's
+    tolerances tightened to ``tight`` (where adaptive step choices no longer differ) and at the
+    baseline's own."""
+    KJ = stiffness_np(theta[:9])
+    q_rest = np.append(theta[9:12], elbow)
+    a, a0 = (np.exp(theta[12]), np.exp(theta[13])) if len(theta) == 14 else (0.2, 0.2)
+    q = m.q_obs[0, m.q_obs.shape[1] // 2]
+    out = dict(arm_us=dict(closed_form=per_call_us(arm, q), slow_reference=per_call_us(arm_rot, q)))
+    args = (m.q_obs[0, 0], arm(m.q_obs[0, -1])[0], KJ, q_rest, a * m.t_ratio[0], a0 * m.t_ratio[0])
+    f_new, f_old = field_np(*args), field_rot(*args)
+    out["field_us"] = dict(closed_form=per_call_us(f_new, 0.3, q), slow_reference=per_call_us(f_old, 0.3, q))
+    s = np.linspace(0.0, 1.0, m.q_obs.shape[1])
+    rel = 0.0
+    for qo, tr in zip(m.q_obs, m.t_ratio):
+        args = (qo[0], arm(qo[-1])[0], KJ, q_rest, a * tr, a0 * tr)
+        f_new, f_old = field_np(*args), field_rot(*args)
+        for sj, qj in zip(s, qo):
+            u, v = f_new(sj, qj), f_old(sj, qj)
+            rel = max(rel, float(np.max(np.abs(u - v)) / max(np.max(np.abs(v)), 1e-300)))
+    out["field_max_rel_diff"] = rel
+    r_new = residual_np(theta, m.q_obs, m.t_ratio, elbow, tol=tight)
+    r_old = residual_np(theta, m.q_obs, m.t_ratio, elbow, tol=tight, **SLOW)
+    out["residual_max_abs_diff_tight"] = float(np.max(np.abs(r_new - r_old)))
+    r_new = residual_np(theta, m.q_obs, m.t_ratio, elbow)
+    r_old = residual_np(theta, m.q_obs, m.t_ratio, elbow, **SLOW)
+    out["residual_max_abs_diff"] = float(np.max(np.abs(r_new - r_old)))
+    out["cost_closed_form"], out["cost_slow_reference"] = 0.5 * float(r_new @ r_new), 0.5 * float(r_old @ r_old)
+    assert out["field_max_rel_diff"] < 1e-10, out
+    assert out["residual_max_abs_diff_tight"] < 1e-9, out
+    return out
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", action="store_true", help="the held-out table of every variant")
-    ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="with --table: HuG-MP subjects")
-    ap.add_argument("--name", default="reaching_table", help="with --table: results file name")
+    ap.add_argument("--subjects", type=int, nargs="+", default=SUBJECTS, help="HuG-MP subjects")
+    ap.add_argument("--name", default=None, help="results file name (default reaching_table with --table, else "
+                    "reaching; reaching_<subjects> for other subjects)")
     ap.add_argument("--variants", nargs="+", choices=sorted(VARIANT_NAMES), help="with --table: these variants")
     ap.add_argument("--max-steps", type=int, nargs=2, default=None, help="LM iterations (default: fit_reaching's)")
     ap.add_argument("--scipy-nfev", type=int, default=3, help="residual calls of the capped SciPy fit")
+    ap.add_argument("--rounds", type=int, default=2,
+                    help="alternating timed runs of the one-subject fit and of a residual call of each baseline")
     args = ap.parse_args()
     if args.table:
+        args.name = args.name or "reaching_table"
         table(args)
     else:
         fit_cost(args)
