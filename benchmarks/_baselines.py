@@ -311,6 +311,42 @@ def build_numba():
 # timing helpers
 
 
+def lambda0_rhs(fk_jac, q0, target, KJ, q_rest, tau, tau0):
+    """A careful SciPy user's λ0-PMP field ``rhs(t, q)`` (``W = τ0 KJ``, Arimoto's gain with Eq 10's
+    ``k = b_max/τ0`` at ``q0``) for a closed-form ``fk_jac(q) -> (x, J)``. With ``A = W⁻¹``,
+    ``g = A τ_el = (q − q_rest)/τ0`` and ``P = A Jᵀ``: ``q̇ = P (F + λ0) − g``, ``λ0 = (J P)⁻¹ J g``
+    (one m×m solve), ``F = K(t) (x_d − x)``."""
+    import math
+
+    A = np.linalg.inv(tau0 * KJ)  # once per movement
+    _, J0 = fk_jac(q0)
+    k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)
+    itau, itau0, exp = 1.0 / tau, 1.0 / tau0, math.exp
+
+    def rhs(t, q):
+        x, J = fk_jac(q)
+        s = t * itau
+        g = (q - q_rest) * itau0
+        P = A @ J.T
+        lam0 = np.linalg.solve(J @ P, J @ g)
+        return P @ ((k * (1.0 - (1.0 + s) * exp(-s))) * (target - x) + lam0) - g
+
+    return rhs
+
+
+def per_call_us(fn, *args, number=2000, repeats=7):
+    """Minimum over ``repeats`` of the mean µs per call of ``fn(*args)`` in ``number`` calls."""
+    import time
+
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(number):
+            fn(*args)
+        best = min(best, (time.perf_counter() - t) / number)
+    return 1e6 * best
+
+
 def best_of(fn, repeats: int, min_total: float = 0.0):
     """Minimum wall time [s] of ``fn()`` over ``repeats`` calls (more if ``min_total`` not reached)."""
     times = []

@@ -83,7 +83,7 @@ import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
 import _baselines as bl  # noqa: E402
-from _baselines import write_results  # noqa: E402
+from _baselines import per_call_us, write_results  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
@@ -127,15 +127,8 @@ def _field(KJ, q_rest, tau0, tau, q0, target):
     A = np.linalg.inv(tau0 * KJ)  # once per movement
     _, J0 = _fk_jac(q0)
     k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)  # b_max/τ0, b_max = 1/λ_min(J A Jᵀ)
-    itau, itau0, exp = 1.0 / tau, 1.0 / tau0, math.exp
-
-    def rhs(t, q):
-        x, J = _fk_jac(q)
-        s = t * itau
-        g = (q - q_rest) * itau0
-        P = A @ J.T
-        lam0 = np.linalg.solve(J @ P, J @ g)
-        return P @ ((k * (1.0 - (1.0 + s) * exp(-s))) * (target - x) + lam0) - g
+    itau, itau0 = 1.0 / tau, 1.0 / tau0
+    rhs = bl.lambda0_rhs(_fk_jac, q0, target, KJ, q_rest, tau, tau0)
 
     def rows(t, Q):
         x, J = _fk_jac_rows(Q)
@@ -308,17 +301,6 @@ def tile(an, KJ, q_rest, S):
         fields[f.name] = v
     fields["subjects"] = tuple(f"s{i}" for i in range(S))
     return dataclasses.replace(an, **fields), KJ[idx], q_rest[idx]
-
-
-def per_call_us(fn, *args, number=2000, repeats=7):
-    """Minimum over ``repeats`` of the mean µs per call of ``fn(*args)`` in ``number`` calls."""
-    best = math.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        for _ in range(number):
-            fn(*args)
-        best = min(best, (time.perf_counter() - t) / number)
-    return 1e6 * best
 
 
 def check_against_reference(d, KJ, q_rest, theta, opts, pairs=3):

@@ -109,7 +109,7 @@ import scipy.optimize  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
 import _baselines as bl  # noqa: E402
-from _baselines import write_results  # noqa: E402
+from _baselines import per_call_us, write_results  # noqa: E402
 
 import fitting  # noqa: E402
 from fitting import _reaching as R  # noqa: E402
@@ -164,24 +164,9 @@ def stiffness_np(s):
 
 
 def field_np(q0, target, KJ, q_rest, tau, tau0):
-    """The λ0-PMP field ``rhs(s, q)`` (``W = τ0 KJ``, Arimoto with Eq 10's gain) on normalised time.
-    With ``A = W⁻¹``, ``g = A τ_el = (q − q_rest)/τ0`` and ``P = A Jᵀ``: ``q̇ = P (F + λ0) − g``,
-    ``λ0 = (J P)⁻¹ J g`` (one 3×3 solve), ``F = K(s) (x_d − x)``."""
-    A = np.linalg.inv(tau0 * KJ)  # once per motion
-    _, J0 = arm(q0)
-    k = 1.0 / (np.linalg.eigvalsh(J0 @ A @ J0.T)[0] * tau0)
-    itau, itau0 = 1.0 / tau, 1.0 / tau0
-    exp = math.exp
-
-    def rhs(t, q):
-        x, J = arm(q)
-        s = t * itau
-        g = (q - q_rest) * itau0
-        P = A @ J.T
-        lam0 = np.linalg.solve(J @ P, J @ g)
-        return P @ ((k * (1.0 - (1.0 + s) * exp(-s))) * (target - x) + lam0) - g
-
-    return rhs
+    """The λ0-PMP field ``rhs(s, q)`` on normalised time through the closed-form arm
+    (``_baselines.lambda0_rhs``; one 3×3 solve)."""
+    return bl.lambda0_rhs(arm, q0, target, KJ, q_rest, tau, tau0)
 
 
 #: solve_ivp's tolerances of the baseline (and of the first one)
@@ -274,17 +259,6 @@ def movement_rot(q0, target, KJ, q_rest, tau, tau0, n=50, tol=TOL):
 
 
 SLOW = dict(arm=arm_rot, movement=movement_rot, stiffness=stiffness_rot)
-
-
-def per_call_us(fn, *args, number=2000, repeats=7):
-    """Minimum over ``repeats`` of the mean µs per call of ``fn(*args)`` in ``number`` calls."""
-    best = math.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        for _ in range(number):
-            fn(*args)
-        best = min(best, (time.perf_counter() - t) / number)
-    return 1e6 * best
 
 
 # --- compile time from jax.monitoring ------------------------------------------------------------

@@ -159,11 +159,10 @@ beyond the noise). Bounds, same method: the
 same kernel writing into a 28 MB ring instead of the 353 MB output runs at 1.13–1.29× the
 final-only call; the 400 one-step segments without any observation at 1.01–1.10×.
 
-Changed this session: the initial fills of the five outputs are distinct constants (XLA merged the
-equal zero fills of q and q̇, x and ẋ and then copied them apart: two whole-output copies) and the
-manipulability has its own (B, S) buffer (it was a reshaped view, copied after the loop): XLA's
-temporaries at B = 10 000 49 → 21 MB (``tests/test_simulate.py::test_every_step_saving_writes_in_place``);
-time within noise (paired medians 1.46 → 1.43, 20 rounds).
+Output layout: the initial fills of the five outputs are distinct constants (XLA merges equal fills
+and then copies them apart: whole-output copies) and the manipulability has its own (B, S) buffer
+(a reshaped view is copied after the loop): XLA's temporaries at B = 10 000 are 21 MB
+(``tests/test_simulate.py::test_every_step_saving_writes_in_place``).
 
 Tried and rejected (2026-12-04, same process, variants imported side by side and interleaved,
 15–20 rounds, median of paired ratios, idle): writing the previous block while the next one

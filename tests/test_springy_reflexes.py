@@ -118,7 +118,7 @@ def test_grasp_stops_where_touched_without_overshoot(arm, free_arm, scenarios):
     q_touch = tr.q[i, k - 1]  # the posture where the touch was sensed
     after = tr.q[i, k:] - q_touch
     assert after.max() < 0.05  # stops within 0.05 rad (the arm moved at ~1 rad/s)
-    assert after.min() > -0.005  # no swing back past the touched posture (before the fix: -0.45)
+    assert after.min() > -0.005  # no swing back past the touched posture (a held set-point swung back 0.45 rad)
     assert np.abs(tr.q[i, -1] - q_touch).max() < 2e-4  # holds the touched posture...
     assert np.abs(tr.qdot[i, -1]).max() < 2e-3
     # ...with the set-point above it by the gravity sag: check against C statics of that set-point.
@@ -196,7 +196,7 @@ def test_lead_yields_to_a_push_above_threshold_only(free_arm, scenarios):
 def test_overlapping_reflex_moves_sum(arm, scenarios):
     """Williamson's Figure 4 inside the network: the set-point velocity is the sum of the moves'
     minimum-jerk velocities (paper formula, each move from the previous target), whatever the
-    issue times (before the fix a reach issued at t = 0 was replaced by the next target)."""
+    issue times (a reach issued at t = 0 must not be replaced by the next target)."""
     tr, t, dt = scenarios["traj"], scenarios["t"], arm.dt
     rest = arm.q_rest
     a, b, c = MOVE_TARGETS + rest
