@@ -211,3 +211,50 @@ def test_rk4_refusal_no_longer_promises_stability_is_accuracy():
     with pytest.raises(ValueError, match="too large for RK4") as info:
         pj.simulate(model(), pj.ArimotoPlanner(k=1e6, tau=0.08), Q_REST, TARGETS[0], duration=T, dt=0.01)
     assert "any dt" not in str(info.value) and "accuracy" in str(info.value)
+
+
+def _rk4_step_and_estimate(q, x_d, h, g):
+    """One classical RK4 step of the reference field and its third-order companion's difference
+    ``h (k4 − k5)/6`` (weights 1/6, 1/3, 1/3, 0, 1/6 with ``k5 = f(t + h, y_next)``), in NumPy."""
+    f = lambda t, y: pmp_qdot(y, t, x_d, KJ, Q_REST, W, g)  # noqa: E731
+    k1 = f(0.0, q)
+    k2 = f(0.5 * h, q + 0.5 * h * k1)
+    k3 = f(0.5 * h, q + 0.5 * h * k2)
+    k4 = f(h, q + h * k3)
+    y = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return y, np.abs(h / 6 * (k4 - f(h, y))).max()
+
+
+def test_rk4_estimate_is_the_embedded_difference_on_both_kernels():
+    # One 10 ms step from a posture off the rest: the step and its estimate against NumPy, on the
+    # compile-light kernel (an eager call of a few movements) and on the unrolled one (a caller's
+    # jit of more than 16 movements).
+    h = 0.01
+    q0 = Q_REST + np.deg2rad([3.0, -4.0, 2.0])
+    g = arimoto(22.5, 0.02)
+    x_d = np.concatenate([TARGETS] * 3)  # 24 movements
+    ref = [_rk4_step_and_estimate(q0, x, h, g) for x in x_d]
+    y_ref, e_ref = np.stack([r[0] for r in ref]), np.array([r[1] for r in ref])
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.02)
+    kw = dict(duration=h, dt=h, saveat=pj.SaveAt(final=True))
+    light = pj.simulate(model(), planner, q0, x_d[:3], **kw)
+    heavy = jax.jit(lambda x: pj.simulate(model(), planner, q0, x, **kw))(jnp.asarray(x_d))
+    for tr, n in ((light, 3), (heavy, 24)):
+        np.testing.assert_allclose(np.asarray(tr.q)[:, -1], y_ref[:n], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(tr.error_estimate), e_ref[:n], rtol=1e-9, atol=1e-15)
+    assert e_ref.min() > 1e-9  # the step is coarse enough for the estimate to be far from round-off
+
+
+def test_the_default_tolerance_is_half_a_milliradian():
+    # The documented defaults (atol = 5e-4 rad, rtol = 1e-4): a run whose estimate lies between
+    # 5e-4 and 5e-3 rad (RODAS4 at 20 ms on Figure 3; truly within 0.01°) is INACCURATE by default
+    # and SUCCESSFUL at atol = 5e-3: the conservative side of the bound, pinned by behaviour.
+    kw = dict(duration=T, dt=0.02, saveat=pj.SaveAt(final=True), solver="rodas4")
+    planner = pj.ArimotoPlanner(k=22.5, tau=0.08)
+    default = pj.simulate(model(), planner, Q_REST, TARGETS[:2], **kw)
+    est = np.asarray(default.error_estimate)
+    scale = np.abs(np.concatenate([np.asarray(default.q)[:, -1], np.broadcast_to(Q_REST, (2, 3))], 1)).max(1)
+    assert np.all((est > 5e-4 + 1e-4 * scale) & (est < 5e-3))
+    assert np.all(np.asarray(default.status) == int(pj.Status.INACCURATE))
+    loose = pj.simulate(model(), planner, Q_REST, TARGETS[:2], atol=5e-3, **kw)
+    assert np.all(np.asarray(loose.status) == 0)
