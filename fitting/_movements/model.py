@@ -60,10 +60,6 @@ class Config:
     stol: float = 1e-4
 
 
-def n_stiffness(cfg: Config) -> int:
-    return spd_size(cfg.n)
-
-
 def n_postural(cfg: Config) -> int:
     return spd_size(cfg.n) + cfg.n
 
