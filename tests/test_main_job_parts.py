@@ -5,6 +5,7 @@ each runs, writes its artefacts, and its numbers agree with something independen
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from pmpjax._app import cli
 
@@ -38,7 +39,18 @@ def test_ik_parts_report_the_papers_quantities(run):
     w3 = np.array(fig["fig3_w"])
     assert abs(w3[0, 1] - 0.01) > 0.3 and abs(w3[-1, 1] - 0.01) < 0.05
     syn = res["ik_synthetic"]["results"]
-    assert 0 <= syn["hotelling_p"] <= 1 and syn["items"] == 2 * 6
+    assert syn["items"] == 2 * 6
+    # the paired Hotelling T² of the per-participant weights, from NumPy means and covariances and
+    # SciPy's F distribution (the weights that vary: not fixed at 1, not pinned by the normalisation)
+    w_syn = np.array(syn["w"])  # (participants, conditions, joints)
+    varying = np.ptp(w_syn, axis=(0, 1)) > 1e-9
+    d = w_syn[:, 0, varying] - w_syn[:, 1, varying]
+    N, p = d.shape
+    t2 = N * d.mean(0) @ np.linalg.solve(np.cov(d, rowvar=False), d.mean(0))
+    f = (N - p) / (p * (N - 1)) * t2
+    assert p == 2 and syn["hotelling_t2"] == pytest.approx(t2, rel=1e-9) and syn["hotelling_f"] == pytest.approx(f, rel=1e-9)
+    assert syn["hotelling_p"] == pytest.approx(stats.f.sf(f, p, N - p), rel=1e-6)
+    np.testing.assert_allclose(syn["w_mean"], w_syn.mean(0), atol=1e-12)
     hug = res["ik_hugmp"]["results"]
     w, lo, hi = (np.array(hug[k]) for k in ("w", "lo", "hi"))
     finite = np.isfinite(w) & np.isfinite(lo) & np.isfinite(hi)

@@ -265,8 +265,9 @@ def _ik_synthetic(ctx) -> dict:
               f"F = {float(ht.f):.1f}, p = {float(ht.p):.2g}; largest |w − w_true| = {err:.3f}.",
               "Paper: β = (0.04, 0.27, 0.65, 0.04) Natural, (0.09, 0.68, 0.14, 0.09) Viscous; T² = 225.3.")
     ctx.log(f"Hotelling T² {float(ht.t2):.1f}, p = {float(ht.p):.2g}; max |w − w_true| {err:.3f}")
-    return {"conditions": list(arr["conditions"]), "w_mean": w.mean(0).tolist(), "beta_mean": beta.tolist(),
-            "hotelling_t2": float(ht.t2), "hotelling_f": float(ht.f), "hotelling_p": float(ht.p),
+    return {"conditions": list(arr["conditions"]), "w": w.tolist(), "w_mean": w.mean(0).tolist(),
+            "beta_mean": beta.tolist(), "hotelling_t2": float(ht.t2), "hotelling_f": float(ht.f),
+            "hotelling_p": float(ht.p),
             "max_abs_error_vs_truth": err, "items": int(P * C),
             "converged": [int(np.asarray(res.converged).sum()), int(P * C)]}
 
