@@ -112,6 +112,34 @@ class MovementFit:
     def subject_index(self, subject) -> int:
         return self.subjects.index(str(subject))
 
+    def parameter_rows(self) -> list[dict]:
+        """One row per subject and parameter: ``subject``, ``parameter``, ``value``, ``stderr`` (of
+        the fitted parameter, in ``param_names``' units), ``identified`` (False: the parameter loads
+        on an unidentified direction, its value a gauge)."""
+        rows = []
+        for a, s in enumerate(self.subjects):
+            gauge = {name for direction in self.unidentified[a] for name in direction}
+            rows += [{"subject": s, "parameter": name, "value": float(self.params[a, i]),
+                      "stderr": float(self.stderr[a, i]), "identified": name not in gauge}
+                     for i, name in enumerate(self.param_names)]
+        return rows
+
+    def summary(self) -> list[dict]:
+        """One row per subject: status, time constants, training error, integration error, AIC/BIC."""
+        unit = "s" if self.time_constants == "seconds" else "T"
+        rows = []
+        for a, s in enumerate(self.subjects):
+            rows.append({
+                "subject": s, "status": status_message(int(self.status[a])), "converged": bool(self.converged[a]),
+                "reaches": int(self.n_reaches[a]), f"tau0 [{unit}]": float(self.tau0[a]),
+                f"tau [{unit}]": float(self.tau[a]), f"delay [{unit}]": float(self.delay[a]),
+                "train_rmse [deg]": float(self.rmse_deg[a]), "integration_error [deg]": float(self.integration_error_deg[a]),
+                "cond KJ": float(np.linalg.cond(self.KJ[a])) if np.all(np.isfinite(self.KJ[a])) else math.nan,
+                "aic": float(self.aic[a]), "bic": float(self.bic[a]),
+                "lm_steps": int(self.lm_steps[a].sum()), "unidentified": "; ".join(" + ".join(d) for d in self.unidentified[a]),
+            })
+        return rows
+
 
 def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
     """Pad subjects' reaches to a common count (a multiple of ``bucket``; padding = copies of the
@@ -151,19 +179,35 @@ def _stage1(theta0, data, chain, max_steps, *, cfg):
     return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
+def _unidentified(J, n: int):
+    """Singular values (p,) of the trajectory residual's Jacobian ``J`` (N, p) on its data rows (the
+    last ``1 + n`` rows, the bounds' penalties, would make any direction "identified") and the
+    unidentified directions (p, p) as rows (zero rows for the identified ones)."""
+    J = J[: -(1 + n)]
+    J = jnp.where(jnp.isfinite(J), J, 0.0)
+    _, s, Vt = jnp.linalg.svd(J, full_matrices=False)
+    keep = s > IDENTIFIABILITY_RCOND * s[0]
+    return s, jnp.where(keep[:, None], 0.0, Vt)
+
+
+def _integration_error_one(th, dat, chain, cfg, steps, solver):
+    """Largest joint difference [rad] of the used reaches between ``steps`` and ``2·steps``."""
+    p = mdl.unpack(th, cfg)
+    model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg)
+    q0, tg = dat["q_start"], dat["target"]
+    a = mdl.simulate(chain, model, planner, q0, tg, steps, solver).q
+    b = mdl.simulate(chain, model, planner, q0, tg, 2 * steps, solver).q
+    return jnp.max(jnp.where((dat["weight"] > 0)[:, None, None], jnp.abs(a - b), 0.0))
+
+
 @partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
 def _identifiability(theta, data, chain, *, cfg, steps, solver):
-    """Singular values (S, p) of the trajectory residual's Jacobian at ``theta`` (S, p) and its
-    unidentified directions (S, p, p) as rows (zero rows for the identified ones)."""
+    """Singular values (S, p) and unidentified directions (S, p, p) at ``theta`` (S, p) (a
+    Donders-fitted model: stage 2 reports them itself)."""
 
     def one(th, dat):
-        # the data's rows only: the bounds' penalties would make any direction "identified"
-        J = jax.jacfwd(lambda t: mdl.trajectory_residual(t, dat, chain, cfg, steps, solver))(th)[: -(1 + cfg.n)]
-        J = jnp.where(jnp.isfinite(J), J, 0.0)
-        _, s, Vt = jnp.linalg.svd(J, full_matrices=False)
-        keep = s > IDENTIFIABILITY_RCOND * s[0]
-        V0 = jnp.where(keep[:, None], 0.0, Vt)  # rows: unidentified directions
-        return s, V0
+        J = jax.jacfwd(lambda t: mdl.trajectory_residual(t, dat, chain, cfg, steps, solver))(th)
+        return _unidentified(J, cfg.n)
 
     return jax.lax.map(lambda a: one(*a), (theta, data))
 
@@ -174,25 +218,12 @@ def _stage2(theta0, data, chain, max_steps, *, cfg, steps, solver):
         res = lambda th, d: mdl.trajectory_residual(th, d, chain, cfg, steps, solver)  # noqa: E731
         r = least_squares(res, th0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
         cov, _, _, _ = covariance(r)
+        sv, V0 = _unidentified(r.jac, cfg.n)
+        err = _integration_error_one(r.x, dat, chain, cfg, steps, solver)
         return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status,
-                    steps=r.steps, cov=cov)
+                    steps=r.steps, cov=cov, singular_values=sv, V0=V0, integration_error=err)
 
     return jax.lax.map(lambda a: one(*a), (theta0, data))
-
-
-@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
-def _integration_error(theta, data, chain, *, cfg, steps, solver):
-    """(S,) largest joint difference [rad] of the used reaches between ``steps`` and ``2·steps``."""
-
-    def one(th, dat):
-        p = mdl.unpack(th, cfg)
-        model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg)
-        q0, tg = dat["q_start"], dat["target"]
-        a = mdl.simulate(chain, model, planner, q0, tg, steps, solver).q
-        b = mdl.simulate(chain, model, planner, q0, tg, 2 * steps, solver).q
-        return jnp.max(jnp.where((dat["weight"] > 0)[:, None, None], jnp.abs(a - b), 0.0))
-
-    return jax.lax.map(lambda a: one(*a), (theta, data))
 
 
 def _check_choice(name, value, options):
@@ -286,15 +317,13 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
     for _ in range(4):
         s2 = jax.device_get(_stage2(x, data, chain, np.int32(ms[1]), cfg=cfg, steps=steps, solver=solver))
         lm2 = lm2 + s2["steps"]
-        err = np.rad2deg(np.asarray(_integration_error(s2["x"], data, chain, cfg=cfg, steps=steps, solver=solver)))
+        err = np.rad2deg(np.asarray(s2["integration_error"]))
         finite = np.all(np.isfinite(s2["x"]), axis=-1)
         if np.all(~finite | (err <= INTEGRATION_TOL_DEG)) or steps >= MAX_STEPS_PER_SAMPLE:
             break
         x = np.where(finite[:, None], s2["x"], x)
         steps *= 2
-    x = np.where(np.all(np.isfinite(s2["x"]), axis=-1)[:, None], s2["x"], theta0)
-    sv, V0 = jax.device_get(_identifiability(x, data, chain, cfg=cfg, steps=steps, solver=solver))
-    out.update(singular_values=sv, V0=V0)
+    out.update(singular_values=s2["singular_values"], V0=s2["V0"])
     out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], cov=s2["cov"],
                residual=s2["residual"], steps=steps, integration_error_deg=err, lm2=lm2)
     bad = err > INTEGRATION_TOL_DEG

@@ -23,6 +23,7 @@ from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
 from .._base.validate import is_concrete, to_jax
 from .kinematics import Chain
+from .serial import site_fk_jac_soa, site_path
 
 _SLIDE = 2  # mujoco.mjtJoint.mjJNT_SLIDE
 _HINGE = 3  # mujoco.mjtJoint.mjJNT_HINGE
@@ -285,8 +286,6 @@ class MjcfChain(Chain):
     ``reachable`` accepts points closer to the first joint than 0.99 × the summed link offsets.
     """
 
-    _jit_eager = False  # (fk_jac_soa runs eager chunks of one compiled kernel)
-
     mjx_model: Any
     site_id: int = static_field(default=0)
     n: int = static_field(default=0)
@@ -294,6 +293,7 @@ class MjcfChain(Chain):
     center: tuple = static_field(default=(0.0, 0.0, 0.0))
     reach: float = static_field(default=np.inf)
     joint_names: tuple[str, ...] | None = static_field(default=None)
+    path: tuple = static_field(default=())
 
     def __init__(self, xml_or_model, site: str):
         mujoco = import_mujoco()
@@ -330,16 +330,17 @@ class MjcfChain(Chain):
         object.__setattr__(self, "reach", float(reach))
         names = tuple(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in np.argsort(m.jnt_qposadr))
         object.__setattr__(self, "joint_names", names if all(names) else None)
+        object.__setattr__(self, "path", site_path(m, int(sid)))
 
     def site_position(self, q):
         """Site position (3,) for one posture ``q`` (n,) (differentiable)."""
         return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
-        batch = qc.shape[1:]
-        x, J = site_jacobians(self.mjx_model, self.site_id, on_host(qc, lambda a: a.reshape(self.n, -1).T))
-        return (on_host(x, lambda a: a.T.reshape((3,) + batch)),
-                on_host(J, lambda a: a.transpose(1, 2, 0).reshape((3, self.n) + batch)))
+        """Site position (3, ...) and Jacobian (3, n, ...) at ``qc`` (n, ...): the bodies from the
+        world to the site unrolled with the model's constants (``pmpjax._chains.serial``), fused
+        into the caller's loop like a closed-form chain."""
+        return site_fk_jac_soa(self.path, self.n, qc)
 
     def reachable(self, x):
         r = np.linalg.norm(np.asarray(x, dtype=float) - np.asarray(self.center), axis=-1)
