@@ -17,6 +17,11 @@ from ._app.simulate import ConfigError as ConfigError
 from ._app.simulate import build_simulation as build_simulation
 from ._app.simulate import example_help as example_help
 from ._app.simulate import read_config as read_config
+
+# Command-line text: help without docstring markup, counts with their nouns, option types
+from ._app.text import plain as plain
+from ._app.text import plural as plural
+from ._app.text import positive_int as positive_int
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
 from ._base.batching import on_host as on_host
@@ -26,6 +31,11 @@ from ._base.batching import unflatten_batch as unflatten_batch
 from ._base.compile import FAST_COMPILE as FAST_COMPILE
 from ._base.compile import TopLevelOptionsJit as TopLevelOptionsJit
 from ._base.compile import fast_compile_jit as fast_compile_jit
+
+# Strict JSON files (NaN and inf as null; arrays as lists)
+from ._base.jsontext import json_safe as json_safe
+from ._base.jsontext import json_text as json_text
+from ._base.jsontext import write_json as write_json
 
 # Component-leading ("SoA") linear algebra: arrays (m, n, *batch) with components first
 from ._base.linalg import det as det
@@ -50,6 +60,7 @@ from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import input_file as input_file
 from ._base.validate import is_concrete as is_concrete
+from ._base.validate import open_npz as open_npz
 from ._base.validate import output_dir as output_dir
 from ._base.validate import read_text_file as read_text_file
 from ._base.validate import to_jax as to_jax

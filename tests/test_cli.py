@@ -79,9 +79,49 @@ def test_a_failing_part_is_reported_and_the_others_run(tmp_path, monkeypatch):
     assert "Failed" in (tmp_path / "report.html").read_text()
 
 
+def test_ctrl_c_ends_with_one_line_and_keeps_the_finished_parts(tmp_path, monkeypatch, capsys):
+    """Ctrl-C: one line saying what is kept (exit 130, no traceback); the re-run runs the rest,
+    and the report links no traceback of a part's earlier failure."""
+    state = {"second": "fails"}
+
+    def first(ctx):
+        """Writes a table."""
+        ctx.table([{"a": 1}], "first.csv", "**Verdict:** fine.")
+        return {}
+
+    def second(ctx):
+        """Fails, is interrupted, then works."""
+        if state["second"] == "fails":
+            raise RuntimeError("boom")
+        if state["second"] == "interrupted":
+            raise KeyboardInterrupt
+        return {}
+
+    for host in (main_job, cli):
+        monkeypatch.setattr(host, "available_parts", lambda: {"first": first, "second": second})
+    assert cli.main([*RUN, str(tmp_path)]) == 1
+    assert "RuntimeError" in (tmp_path / "second.error.txt").read_text()
+    capsys.readouterr()
+    state["second"] = "interrupted"
+    assert cli.main([*RUN, str(tmp_path)]) == 130
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1] == ("pmpjax reproduce: interrupted; the finished parts are in "
+                                    f"{tmp_path}/results.json; run the same command again to run the others"), err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert _strict_json((tmp_path / "results.json").read_text())["first"]["status"] == "ok"
+    state["second"] = "works"
+    assert cli.main([*RUN, str(tmp_path)]) == 0
+    assert "first: finished earlier, skipped" in capsys.readouterr().err
+    html = (tmp_path / "report.html").read_text()
+    assert not (tmp_path / "second.error.txt").exists() and "second.error.txt" not in html
+    assert "<b>Verdict:</b> fine." in html and "**" not in html  # a caption's Markdown bold, rendered
+
+
 def _unconverged_part(ctx):
     """Fits of which none converged."""
-    return {"converged": [0, 3]}
+    import numpy as np
+
+    return {"converged": [0, 3], "rms": float("nan"), "per_fit": np.array([np.nan, 1.5, -np.inf])}
 
 
 def _converged_part(ctx):
@@ -89,11 +129,24 @@ def _converged_part(ctx):
     return {"converged": [[True], [True]]}
 
 
+def _strict_json(text):
+    """JSON as the standard defines it: NaN and Infinity are not JSON."""
+    def refuse(constant):
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+RUN = ["reproduce", "--quick", "--no-progress", "--no-cache", "--jobs", "1", "--out"]
+
+
 def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, capsys):
     parts = {"partial": _unconverged_part, "whole": _converged_part}
-    monkeypatch.setattr(main_job, "available_parts", lambda: parts)
-    cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=1)
-    saved = json.loads((tmp_path / "results.json").read_text())
+    for host in (main_job, cli):
+        monkeypatch.setattr(host, "available_parts", lambda: parts)
+    assert cli.main([*RUN, str(tmp_path)]) == 1  # ran, but not every fit converged
+    saved = _strict_json((tmp_path / "results.json").read_text())
+    assert saved["partial"]["results"]["rms"] is None and saved["partial"]["results"]["per_fit"] == [None, 1.5, None]
     assert saved["partial"]["status"] == "ok" and saved["partial"]["converged"] == [0, 3]
     assert saved["partial"]["all_converged"] is False
     assert saved["whole"]["converged"] == [2, 2] and saved["whole"]["all_converged"] is True
@@ -104,6 +157,7 @@ def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, c
     err = capsys.readouterr().err
     assert "partial: ok, 0/3 converged" in err and "whole: ok in" in err
     assert "(1/2 parts)" in err and "(2/2 parts)" in err
+    assert cli.main([*RUN, str(tmp_path), "--only", "whole"]) == 0  # every fit of the parts run converged
 
 
 def test_the_progress_display_counts_the_parts_done():
@@ -118,15 +172,27 @@ def test_the_progress_display_counts_the_parts_done():
         ui.close()
 
 
-# Parts for the worker-process tests: module-level, so that spawned workers can import them.
+# Parts for the worker-process tests: module-level, so that spawned workers can import them. They
+# wait for each other by files in the output folder (events that hold under any load), not by sleeping.
+def _wait_for(*paths, timeout=120.0):
+    """Wait until every file of ``paths`` exists (or fail after ``timeout`` seconds)."""
+    deadline = time.monotonic() + timeout
+    while not all(Path(p).exists() for p in paths):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"waited {timeout} s for {paths}")
+        time.sleep(0.02)
+
+
 def _raising_part(ctx):
     """Raises."""
     raise RuntimeError("boom in a worker")
 
 
 def _crashing_part(ctx):
-    """Kills its worker process (as a segfault in XLA or MuJoCo would)."""
-    time.sleep(1.0)  # (after _raising_part has been taken by the other worker)
+    """Kills its worker process (as a segfault in XLA or MuJoCo would), once the other worker's
+    part has failed."""
+    _wait_for(ctx.out / "raising.error.txt")
+    print("the crashing part's last words", file=sys.stderr, flush=True)
     os._exit(3)
 
 
@@ -139,8 +205,9 @@ def _tiny_part(ctx):
 
 
 def _affinity_part(ctx):
-    """Reports the cores its worker may run on."""
-    time.sleep(1.5)  # (both workers take one)
+    """Reports the cores its worker may run on, once both parts run (one on each worker)."""
+    (ctx.out / f"{ctx.name}.running").touch()
+    _wait_for(ctx.out / "a.running", ctx.out / "b.running")
     return {"pid": os.getpid(), "cores": sorted(os.sched_getaffinity(0))}
 
 
@@ -159,16 +226,19 @@ def test_two_workers_run_on_disjoint_cores(tmp_path, monkeypatch):
 
 
 def _timed_part(ctx):
-    """Sleeps; reports its worker and when it ran."""
+    """Reports its worker and when it ran; "lead" ends only after o1, o2 and o3 have ended."""
     t0 = time.time()
-    time.sleep(2.0 if ctx.name == "lead" else 0.3)
+    if ctx.name == "lead":
+        _wait_for(*(ctx.out / f"o{i}.done" for i in (1, 2, 3)))
+    (ctx.out / f"{ctx.name}.done").touch()
     return {"pid": os.getpid(), "start": t0, "end": time.time()}
 
 
 def test_a_follower_part_runs_after_its_leader_on_the_leaders_worker(tmp_path, monkeypatch):
     """A part that ``follows`` another (donders_nio after pointing, whose NIO compilation it
     reuses): submitted second, it would start at once on the other worker; it waits and runs
-    where its leader ran."""
+    where its leader ran. The leader holds its worker until the other parts have run on the
+    other worker."""
     names = ["lead", "follower", "o1", "o2", "o3"]
     parts = {**dict.fromkeys(names, _timed_part), "follower": Part(_timed_part, follows="lead")}
     monkeypatch.setattr(main_job, "available_parts", lambda: parts)
@@ -186,17 +256,28 @@ def test_parts_in_workers_a_raising_and_a_crashing_part_fail_alone(tmp_path, mon
     tiny = EntryPoint(name="tiny", value=f"{__name__}:_tiny_part", group="pmpjax.jobs")
     parts = {"raising": _raising_part, "crashing": _crashing_part, "tiny": tiny}
     monkeypatch.setattr(main_job, "available_parts", lambda: parts)
+    # An earlier run's traceback and messages of a part that runs again, and of an earlier worker
+    (tmp_path / "_logs").mkdir()
+    for stale in ("tiny.error.txt", "_logs/tiny.log", "_logs/worker-1.log"):
+        (tmp_path / stale).write_text("stale\n")
     res = cli.reproduce(tmp_path, quick=True, progress=False, cache=False, jobs=2)
     assert res["_meta"]["jobs"] == 2
     assert res["raising"]["status"] == "failed" and "boom in a worker" in res["raising"]["error"]
     assert "RuntimeError" in (tmp_path / "raising.error.txt").read_text()
     assert res["crashing"]["status"] == "failed" and "crashed" in res["crashing"]["error"]
+    crash_log = tmp_path / "_logs" / "crashing.log"  # its messages, named in its entry
+    assert str(crash_log) in res["crashing"]["error"]
+    assert "the crashing part's last words" in crash_log.read_text()
     assert res["tiny"]["status"] == "ok" and res["tiny"]["results"] == {"value": 1.5}
     row = (tmp_path / "tiny.csv").read_text().splitlines()[1]
     assert int(row.split(",")[0]) != os.getpid()  # it ran in a worker
     assert list(res) == ["_meta", "raising", "crashing", "tiny"]  # report order, not finishing order
     html = (tmp_path / "report.html").read_text()
     assert html.count("Failed") >= 2 and "tiny.csv" in html
+    assert not (tmp_path / "tiny.error.txt").exists() and not (tmp_path / "_logs" / "worker-1.log").exists()
+    tiny_log = tmp_path / "_logs" / "tiny.log"
+    assert not tiny_log.exists() or "stale" not in tiny_log.read_text()
+    assert "tiny.error.txt" not in html and "worker-1.log" not in html and "_logs/crashing.log" in html
 
 
 def test_two_workers_give_the_numbers_of_one_process(run_dir, tmp_path, monkeypatch):
@@ -255,9 +336,11 @@ def _alive(pid):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and prctl: Linux")
-def test_terminating_the_command_stops_its_worker_processes(tmp_path):
-    """SIGTERM to ``reproduce`` (a job scheduler's timeout, ``kill``) must not leave its spawned
-    workers computing: they stop with it."""
+@pytest.mark.parametrize("stop", ["SIGTERM", "Ctrl-C"])
+def test_stopping_the_command_stops_its_worker_processes(tmp_path, stop):
+    """SIGTERM to ``reproduce`` (a job scheduler's timeout, ``kill``) or Ctrl-C (SIGINT to the
+    terminal's process group: the command and its workers) must not leave its spawned workers
+    computing: they stop with it; Ctrl-C ends with one line and exit status 130, no traceback."""
     (tmp_path / "sleepers.py").write_text(textwrap.dedent(f"""
         import os, time
         def sleeper(ctx):
@@ -268,25 +351,35 @@ def test_terminating_the_command_stops_its_worker_processes(tmp_path):
         import sys
         sys.path.insert(0, {str(tmp_path)!r})
         import sleepers
-        from pmpjax._app import reproduce as main_job
-        main_job.available_parts = lambda: {{"a": sleepers.sleeper, "b": sleepers.sleeper}}
-        main_job.reproduce({str(tmp_path / "out")!r}, quick=True, progress=False, cache=False, jobs=2)
+        from pmpjax._app import cli, reproduce as main_job
+        main_job.available_parts = cli.available_parts = lambda: {{"a": sleepers.sleeper, "b": sleepers.sleeper}}
+        sys.exit(cli.main(["reproduce", "--out", {str(tmp_path / "out")!r}, "--quick", "--no-progress",
+                           "--no-cache", "--jobs", "2"]))
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"})
+    proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"},
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     pids = []
     try:
         deadline = time.time() + 120
         while len(pids) < 2:
             assert time.time() < deadline, "the workers never started"
-            assert proc.poll() is None, "the run ended before it could be terminated"
+            assert proc.poll() is None, "the run ended before it could be stopped"
             time.sleep(0.2)
             pids = [int(f.stem.split("-")[1]) for f in tmp_path.glob("worker-*.pid")]
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=60)
+        if stop == "SIGTERM":
+            proc.send_signal(signal.SIGTERM)
+        else:
+            os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
         deadline = time.time() + 30
         while any(_alive(p) for p in pids) and time.time() < deadline:
             time.sleep(0.2)
-        assert not any(_alive(p) for p in pids), "worker processes outlived the terminated command"
+        assert not any(_alive(p) for p in pids), "worker processes outlived the stopped command"
+        if stop == "Ctrl-C":
+            assert proc.returncode == 130, err
+            assert err.strip().splitlines() == [f"pmpjax reproduce: interrupted; the finished parts are in "
+                                                f"{tmp_path / 'out'}/results.json; run the same command again "
+                                                "to run the others"], err
     finally:
         for p in pids:
             with contextlib.suppress(ProcessLookupError):
@@ -313,7 +406,11 @@ def _example(name):
     return str(resources.files("pmpjax") / "data" / "examples" / name)
 
 
-def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys):
+def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys, monkeypatch):
+    import numpy as np
+
+    import pmpjax as pj
+    from pmpjax.internal import replace
 
     assert cli.main(["simulate", _example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
@@ -321,6 +418,59 @@ def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys):
     lines = (tmp_path / "trajectories.csv").read_text().splitlines()
     assert lines[0] == "target,t,q0,q1,q2,x0,x1" and len(lines) == 1 + 8 * 41
     assert (tmp_path / "paths.png").read_bytes()[:8] == PNG_MAGIC
+    assert capsys.readouterr().out.startswith("8 movements, ")
+    # The exit-status policy: a movement that did not end successfully is written, and exits 1.
+    simulate = pj.simulate
+
+    def one_inaccurate(*args, **kwargs):
+        traj = simulate(*args, **kwargs)
+        status = np.asarray(traj.status).copy()
+        status.reshape(-1)[3] = int(pj.Status.INACCURATE)
+        return replace(traj, status=status)
+
+    monkeypatch.setattr(pj, "simulate", one_inaccurate)
+    assert cli.main(["simulate", _example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 1
+    s = _strict_json((tmp_path / "summary.json").read_text())
+    assert [m == pj.Status.SUCCESSFUL.message for m in s["status"]] == [k != 3 for k in range(8)]
+    assert ", 1 not successful (summary.json says why)" in capsys.readouterr().out
+
+
+def test_python_m_pmpjax_in_the_folder_holding_a_clone_says_what_to_do(tmp_path):
+    """A clone named pmpjax, `python -m pmpjax` run beside it: Python imports the clone's folder (no
+    __init__.py) as an empty package; the command says so instead of an ImportError."""
+    (tmp_path / "pmpjax" / "pmpjax").mkdir(parents=True)  # (a clone: the package is one level down)
+    run = {"cwd": tmp_path, "capture_output": True, "text": True, "env": {**os.environ, "PYTHONPATH": ""}}
+    probe = subprocess.run([sys.executable, "-c", "import pmpjax; print(getattr(pmpjax, '__file__', None))"], **run)
+    if probe.stdout.strip() != "None":
+        pytest.skip("this installation of pmpjax takes precedence over a folder in the current one")
+    proc = subprocess.run([sys.executable, "-m", "pmpjax", "--version"], **run)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert f"imported the folder {tmp_path / 'pmpjax'} instead of the installed pmpjax" in proc.stderr
+    assert "Run the command from any other folder" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_the_application_writes_json_only_as_strict_json():
+    """Every JSON file of the commands and the main job is strict JSON: written by the writer that
+    turns NaN and inf into null, or by json.dump(s) with allow_nan=False (by default json.dumps
+    writes bare NaN, which is not JSON)."""
+    import ast
+
+    import fitting
+
+    modules = [*Path(cli.__file__).parent.glob("*.py"), *(Path(fitting.__file__).parent / "_app").glob("*.py")]
+    assert len(modules) > 8
+    for module in modules:
+        for node in ast.walk(ast.parse(module.read_text())):
+            f = node.func if isinstance(node, ast.Call) else None
+            if not (isinstance(f, ast.Attribute) and f.attr in ("dump", "dumps")
+                    and getattr(f.value, "id", "") == "json"):
+                continue
+            if not any(k.arg == "allow_nan" and getattr(k.value, "value", True) is False for k in node.keywords):
+                pytest.fail(f"{module.name}:{node.lineno}: json.{f.attr} may write NaN; use pmpjax.internal.write_json")
+    from pmpjax.internal import json_text
+
+    text = json_text({"a": float("nan"), "b": [1.0, float("inf")], "c": __import__("numpy").array([-float("inf")])})
+    assert _strict_json(text) == {"a": None, "b": [1.0, None], "c": [None]}
 
 
 def test_simulate_command_ends_in_the_donders_posture(tmp_path):

@@ -11,6 +11,7 @@ import pytest
 import fitting
 import pmpjax as pj
 from pmpjax._app import cli
+from pmpjax._app import reproduce as main_job
 
 
 def example(name):
@@ -65,6 +66,18 @@ def test_fit_donders_command_on_the_shipped_example(tmp_path, monkeypatch):
     assert report["report"] == ["report 0", "report 1"] and report["converged"] == [True, False]
 
 
+def test_ik_weights_command_exits_1_when_an_item_did_not_converge(tmp_path, monkeypatch, capsys):
+    """The exit-status policy: the results are written, and the status says not every fit converged."""
+    def fake(qdot, xdot, J, gamma, *, mask, on_invalid):
+        return types.SimpleNamespace(w=np.ones((2, 3)), converged=np.array([True, False]), error=np.zeros(2),
+                                     status=np.array([0, int(pj.Status.MAX_STEPS)]))
+
+    monkeypatch.setattr(fitting._ik.weights, "estimate_ik_weights", fake)
+    assert cli.main(["ik-weights", example("ik_example.csv"), "--out", str(tmp_path)]) == 1
+    assert [r["converged"] for r in read_rows(tmp_path / "ik_weights.csv")] == ["True", "False"]
+    assert capsys.readouterr().out.startswith("1 of 2 items converged")
+
+
 def test_ik_weights_command_recovers_the_weights_of_the_example(tmp_path):
     # ik_example.csv: a planar 3-link arm whose joint velocities are W-weighted pseudo-inverse
     # solutions (γ = 0) with w = (1, 0.5, 0.2) and (0.3, 1, 0.6), generated with plain NumPy.
@@ -95,12 +108,35 @@ def test_commands_reject_malformed_files_with_file_line_and_column(tmp_path, cap
             fitting.read_ik_file(path)
 
 
-def test_commands_have_help(capsys):
-    for command in ("reproduce", "simulate", "fit-donders", "ik-weights"):
+def test_help_and_the_list_of_parts_read_as_plain_text(capsys):
+    """Every command's --help, `pmpjax --help` and `reproduce --list`: no docstring markup (RST
+    double backticks, literal-block colons, bold), no doubled %; the exit statuses documented;
+    developers' notes (the entry-point protocol) left out."""
+    import re
+    from importlib.metadata import version
+
+    commands = list(cli.build_parser()._subparsers._group_actions[0].choices)  # noqa: SLF001
+    assert {"reproduce", "simulate", "fit-donders", "ik-weights", "analyze-pointing", "sweep"} <= set(commands)
+    texts = {}
+    for argv in ([], *([c] for c in commands)):
         with pytest.raises(SystemExit) as e:
-            cli.main([command, "--help"])
+            cli.main([*argv, "--help"])
         assert e.value.code == 0
-        assert command in capsys.readouterr().out
+        texts[" ".join(argv) or "pmpjax"] = capsys.readouterr().out
+    assert cli.main(["reproduce", "--list"]) == 0
+    texts["--list"] = capsys.readouterr().out
+    for where, text in texts.items():
+        assert "``" not in text and "%%" not in text and "**" not in text, (where, text)
+        assert not re.search(r"::\s*$", text, re.MULTILINE), (where, text)
+    assert "segmentation at 20 % of peak speed" in " ".join(texts["analyze-pointing"].split())
+    for where in ("pmpjax", "reproduce"):
+        assert re.search(r"^ +1 +done and written, but not everything succeeded", texts[where], re.MULTILINE)
+        assert re.search(r"^ +130 +interrupted", texts[where], re.MULTILINE)
+    assert not re.search(r"entry.point|pmpjax\._app|func\(args\)", texts["reproduce"]), texts["reproduce"]
+    assert all(f"{name} " in texts["--list"] for name in ("figure3", "figure4", "primitives"))
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"pmpjax {version('pmpjax')}"
 
 
 # Each subcommand that reads a file: its shipped example and how to spoil one column/key of it.
@@ -113,9 +149,20 @@ READERS = [
 ]
 
 
+# What each spoilt file must be refused as (the reason, not only the file's name).
+PNG = b"\x89PNG\r\n\x1a\n\x00\xff\xfe" + bytes(range(256))  # its first NUL: byte 8, after two newlines
+REASONS = {
+    "directory": r"is a directory, not a file",
+    "empty": r"empty file",
+    "binary": r"a binary file \(NUL byte at byte 8, line 3\)",
+    "latin-1": r"not a UTF-8 text file \(line 2, byte 9: b'\\xe9'\)",
+}
+
+
 @pytest.mark.parametrize("command, name, rename", READERS, ids=[r[0] for r in READERS])
-@pytest.mark.parametrize("spoil", ["directory", "empty", "binary", "renamed"])
-def test_every_subcommand_refuses_bad_files_by_name(tmp_path, capsys, command, name, rename, spoil):
+@pytest.mark.parametrize("spoil", ["directory", "empty", "binary", "latin-1", "renamed"])
+def test_every_subcommand_refuses_bad_files_for_the_right_reason(tmp_path, capsys, command, name, rename, spoil):
+    import re
     from pathlib import Path
 
     good = Path(example(name)).read_text()
@@ -125,15 +172,56 @@ def test_every_subcommand_refuses_bad_files_by_name(tmp_path, capsys, command, n
     elif spoil == "empty":
         path.write_text("")
     elif spoil == "binary":
-        path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe" + bytes(range(256)))
+        path.write_bytes(PNG)
+    elif spoil == "latin-1":  # text in another encoding: "# café" on line 2, é (0xe9 in Latin-1) its byte 9
+        path.write_bytes(b"# x\n# caf\xe9\n" + good.encode())
     else:
         assert rename[0] in good
         path.write_text(good.replace(rename[0], rename[1], 1))
     assert cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert path.name in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-    if spoil == "renamed":
-        assert rename[1].strip(",") in err  # the unknown column or key is named
+    if spoil == "renamed":  # the renamed column or key is named as unknown, not found by echoing the header
+        new = re.escape(rename[1].strip(","))
+        assert re.search(rf"unknown (column|key)(\(s\))? \[?'?(model\.)?{new}\b", err), err
+        assert rename[1] not in err.replace(rename[1].strip(","), "", 1), err  # (named once: no header echoed)
+    else:
+        assert re.search(REASONS[spoil], err), err
+        others = [r for k, r in REASONS.items() if k != spoil] + [r"no such file", r"missing", r"unknown"]
+        assert not any(re.search(r, err) for r in others), err
+
+
+@pytest.mark.parametrize("command", ["fit-donders", "analyze-pointing", "ik-weights"])
+def test_random_bytes_named_npz_are_not_an_npz_archive(tmp_path, capsys, command):
+    """Not "pickled data" (what numpy says of any file that is not a zip or .npy)."""
+    path = tmp_path / "noise.npz"
+    path.write_bytes(np.random.default_rng(0).bytes(2000).replace(b"PK", b"pk"))
+    assert cli.main([command, str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "noise.npz: not an NPZ archive (not a zip archive" in err and "pickle" not in err, err
+
+
+def test_a_renamed_ik_column_is_named_as_unknown_and_the_jacobian_is_not_blamed(tmp_path, capsys):
+    from pathlib import Path
+
+    good = Path(example("ik_example.csv")).read_text()  # 3 joints, 2 task coordinates
+    for old, new in (("qdot_1,", "qdot1,"), ("qdot_3,", "qdot_3_,"), ("J_2_3", "J23")):
+        path = tmp_path / "renamed.csv"
+        path.write_text(good.replace(old, new, 1))
+        assert cli.main(["ik-weights", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"unknown column(s) '{new.strip(',')}'" in err and "Traceback" not in err, err
+        assert f"(missing: {old.strip(',')})" in err, err  # the column it replaces, and only that one
+
+
+@pytest.mark.parametrize("command", ["fit-donders", "analyze-pointing"])
+def test_option_values_are_refused_by_their_option_name(tmp_path, capsys, command):
+    with pytest.raises(SystemExit) as e:
+        cli.main([command, example("donders_example.csv"), "--starts", "0", "--out", str(tmp_path)])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --starts: expected a positive integer, got '0'" in err and "n_starts" not in err, err
+    assert not any(tmp_path.iterdir())  # nothing run
 
 
 def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
@@ -213,4 +301,96 @@ def test_analyze_pointing_can_skip_invalid_trials_and_says_so_with_the_option_na
     assert "--skip-invalid" in err and "on_invalid" not in err
     assert cli.main(["analyze-pointing", str(path), "--out", str(tmp_path / "b"), "--no-figures",
                       "--skip-invalid"]) == 0
-    assert "trial 1" in (tmp_path / "b" / "excluded.txt").read_text()
+    captured = capsys.readouterr()
+    # The warning: one line of its own, no source line of the code that raised it.
+    assert captured.err.splitlines() == [captured.err.splitlines()[0]], captured.err
+    assert captured.err.startswith(f"pmpjax analyze-pointing: warning: skipping trial: {path}:")
+    # One line per exclusion, a sentence (not a Python tuple).
+    excluded = (tmp_path / "b" / "excluded.txt").read_text().splitlines()
+    assert len(excluded) == 1 and excluded[0].startswith(f"{path}:"), excluded
+    assert "subject 'subj1', trial 1: NaN" in excluded[0], excluded
+    subjects = {r["subject"] for r in csv.DictReader(ln for ln in lines if not ln.startswith("#"))}
+    assert len(subjects) == 1  # counts with their nouns in the number
+    assert captured.out.startswith("1 subject, ") and ", 1 exclusion (excluded.txt)" in captured.out, captured.out
+
+
+def _can_write(folder) -> bool:
+    try:
+        (folder / "probe").open("x").close()
+    except OSError:
+        return False
+    (folder / "probe").unlink()
+    return True
+
+
+@pytest.fixture(params=["read-only folder", "folder under a file"])
+def unwritable_out(request, tmp_path):
+    """An output folder no file can be written to: a read-only folder (as root, whom permissions do
+    not stop, a sysfs folder) or a path under a regular file."""
+    from pathlib import Path
+
+    if request.param == "folder under a file":
+        (tmp_path / "file").write_text("x")
+        yield tmp_path / "file" / "out"
+        return
+    folder = tmp_path / "read_only"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        if _can_write(folder):
+            folder = Path("/sys/kernel")
+            if not folder.is_dir() or _can_write(folder):
+                pytest.skip("no read-only folder: permissions do not stop this user and there is no sysfs")
+        yield folder
+    finally:
+        (tmp_path / "read_only").chmod(0o700)
+
+
+# Each subcommand, its arguments and the function that does its work (which must not be reached).
+WORK = {
+    "fit-donders": (["donders_example.csv"], "fitting._donders", "fit_donders"),
+    "ik-weights": (["ik_example.csv"], "fitting._ik.weights", "estimate_ik_weights"),
+    "analyze-pointing": (["pointing_example.csv"], "fitting._pointing", "analyze_pointing"),
+    "simulate": (["simulate_figure3.toml"], "pmpjax", "simulate"),
+    "sweep": (["sweep_figure3.toml"], "fitting._sweep", "sweep"),
+    "reproduce": ([], None, None),
+}
+
+
+@pytest.mark.parametrize("command", list(WORK))
+def test_an_output_folder_that_cannot_be_written_is_refused_before_any_work(unwritable_out, capsys, monkeypatch,
+                                                                             command):
+    import importlib
+
+    files, module, name = WORK[command]
+    worked = []
+    if module is not None:
+        monkeypatch.setattr(importlib.import_module(module), name, lambda *a, **k: worked.append(name))
+    else:
+        def part(ctx):
+            """Works."""
+            worked.append("part")
+
+        for host in (main_job, cli):
+            monkeypatch.setattr(host, "available_parts", lambda: {"part": part})
+        files = ["--no-progress", "--no-cache", "--jobs", "1"]
+    argv = [command, *map(example, files[:1]), *files[1:]] if module else [command, *files]
+    assert cli.main([*argv, "--out", str(unwritable_out)]) == 2
+    err = capsys.readouterr().err
+    assert not worked
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert f"pmpjax {command}: error: `--out`: cannot " in err and str(unwritable_out) in err, err
+
+
+def test_the_captured_movements_line_ends_without_a_dangling_colon():
+    """analyze-pointing's pointing_statistics.txt: a subject whose movements the model captures
+    none of ends its line at the count, not at a colon before an empty list."""
+    from fitting._pointing.prediction import PointingPrediction
+
+    labels = ("out-N", "in-N")
+    pred = types.SimpleNamespace(subjects=("s1", "s2"), labels=labels, captured=np.array([[True, False], [False] * 2]),
+                                 n_captured=np.array([1, 0]), share_captured=np.array([0.5, 0.0]),
+                                 n_tested=np.array([2, 2]))
+    assert PointingPrediction.table(pred).splitlines() == [
+        "s1: model captures A_net of 1 of 2 movements (50 %; 2 tested): out-N",
+        "s2: model captures A_net of 0 of 2 movements (0 %; 2 tested)"]

@@ -8,12 +8,23 @@ with status 2 (see ``pmpjax._app.cli``).
 from __future__ import annotations
 
 import csv
-import json
+import re
 from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import csv_floats, example_help, input_file, output_dir, read_text_file
+from pmpjax.internal import (
+    csv_floats,
+    example_help,
+    input_file,
+    open_npz,
+    output_dir,
+    plain,
+    plural,
+    positive_int,
+    read_text_file,
+    write_json,
+)
 
 
 def _x64():
@@ -44,7 +55,7 @@ def add_fit_donders(sub) -> None:
     )
     p.add_argument("file", help="Donders recording (.csv or .npz)")
     p.add_argument("--out", default="out_donders", help="output folder (default out_donders)")
-    p.add_argument("--starts", type=int, default=4, help="LM starts per subject (default 4)")
+    p.add_argument("--starts", type=positive_int, default=4, help="LM starts per subject (default 4)")
     p.set_defaults(func=_fit_donders)
 
 
@@ -71,12 +82,11 @@ def _fit_donders(args) -> int:
             "samples": int(np.asarray(rec.mask[i]).sum()),
         })
     _write_csv(out / "donders_fit.csv", rows)
-    (out / "donders_fit.json").write_text(json.dumps(
-        {"file": str(args.file), "subjects": list(map(str, rec.subjects)), "KJ": np.asarray(fit.KJ).tolist(),
-         "q_rest": np.asarray(fit.q_rest).tolist(), "converged": np.asarray(fit.converged).tolist(),
-         "report": [fit.report(i) for i in range(len(rec.subjects))]}, indent=2))
+    write_json(out / "donders_fit.json", {
+        "file": str(args.file), "subjects": list(map(str, rec.subjects)), "KJ": fit.KJ, "q_rest": fit.q_rest,
+        "converged": fit.converged, "report": [fit.report(i) for i in range(len(rec.subjects))]}, indent=2)
     n_ok = int(np.asarray(fit.converged).sum())
-    print(f"{n_ok}/{len(rows)} subjects converged; wrote {out / 'donders_fit.csv'} and donders_fit.json")
+    print(f"{n_ok} of {plural(len(rows), 'subject')} converged; wrote {out / 'donders_fit.csv'} and donders_fit.json")
     return 0 if n_ok == len(rows) else 1
 
 
@@ -102,7 +112,7 @@ def read_ik_file(path) -> dict:
                 "J": arr["J"].reshape(-1, np.prod(arr["J"].shape[3:5]), m, n),
                 "mask": arr["mask"].reshape(-1, np.prod(arr["mask"].shape[3:5])), "labels": labels}
     if suffix == ".npz":
-        with np.load(path, allow_pickle=False) as z:
+        with open_npz(path) as z:
             missing = [k for k in ("qdot", "xdot", "J") if k not in z.files]
             if missing:
                 raise ValueError(f"{path}: missing array(s) {missing} (found {z.files})")
@@ -116,24 +126,43 @@ def read_ik_file(path) -> dict:
     raise ValueError(f"{path}: unknown format {suffix!r} (expected .mat, .npz or .csv)")
 
 
+_IK_COLUMN = re.compile(r"(?:qdot|xdot)_(\d+)|J_(\d+)_(\d+)")
+
+
 def _read_ik_csv(path: Path) -> dict:
     text = read_text_file(path)
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.startswith("#")]
     if not lines:
         raise ValueError(f"{path}: empty file")
     header = [h.strip() for h in next(csv.reader([lines[0][1]]))]
-    qcols = sorted((h for h in header if h.startswith("qdot_")), key=lambda h: int(h.split("_")[1]))
-    xcols = sorted((h for h in header if h.startswith("xdot_")), key=lambda h: int(h.split("_")[1]))
-    n, m = len(qcols), len(xcols)
+    where = f"{path}: line {lines[0][0]}"
+    # n joints and m task coordinates: the largest indices of the velocity and Jacobian columns
+    index = {h: [int(g) for g in m.groups() if g] for h in header if (m := _IK_COLUMN.fullmatch(h))}
+    unknown = [h for h in header if h != "item" and h not in index]
+    n = max((i[-1] for h, i in index.items() if not h.startswith("xdot_")), default=0)
+    m = max((i[0] for h, i in index.items() if not h.startswith("qdot_")), default=0)
+    qcols, xcols = [f"qdot_{j + 1}" for j in range(n)], [f"xdot_{j + 1}" for j in range(m)]
     jcols = [f"J_{r + 1}_{c + 1}" for r in range(m) for c in range(n)]
-    missing = [h for h in ["item", *jcols] if h not in header]
-    if not n or not m or missing:
-        raise ValueError(f"{path}: line {lines[0][0]}: header needs item, qdot_1..n, xdot_1..m and J_r_c "
-                         f"columns; missing {missing or 'qdot_/xdot_ columns'}")
-    unknown = [h for h in header if h not in {"item", *qcols, *xcols, *jcols}]
+    missing = [h for h in ["item", *qcols, *xcols, *jcols] if h not in header]
     if unknown:
-        raise ValueError(f"{path}: line {lines[0][0]}: unknown column(s) {unknown}; expected item, qdot_1..{n}, "
-                         f"xdot_1..{m}, J_r_c")
+        raise ValueError(f"{where}: unknown column(s) {', '.join(map(repr, unknown))}"
+                         + (f" (missing: {', '.join(missing)})" if missing else "")
+                         + "; the columns are item, qdot_1..n, xdot_1..m and J_r_c (r ≤ m, c ≤ n)")
+    if not n or not m:
+        raise ValueError(f"{where}: the header needs item, qdot_1..n, xdot_1..m and J_r_c columns; no "
+                         + ("qdot_ or xdot_" if not n and not m else "qdot_" if not n else "xdot_") + " columns")
+    if missing:
+        raise ValueError(f"{where}: missing column(s) {', '.join(missing)} (qdot_1..{n}, xdot_1..{m} and every "
+                         f"J_r_c of the {m}x{n} Jacobian)")
+    extra = [h for h in header if h in index and h not in {*qcols, *xcols, *jcols}]
+    if extra:
+        raise ValueError(f"{where}: column(s) {', '.join(extra)} outside qdot_1..{n}, xdot_1..{m} and the {m}x{n} "
+                         "Jacobian J_r_c")
+    duplicated = sorted({h for h in header if header.count(h) > 1})
+    if duplicated:
+        raise ValueError(f"{where}: column(s) {', '.join(duplicated)} appear more than once")
+    if len(lines) < 2:
+        raise ValueError(f"{where}: no data rows after the header")
     idx = {h: header.index(h) for h in header}
     items: dict[str, list] = {}
     for lineno, ln in lines[1:]:
@@ -157,7 +186,8 @@ def _read_ik_csv(path: Path) -> dict:
 def add_ik_weights(sub) -> None:
     p = sub.add_parser(
         "ik-weights", help="estimate IK weights (Khoramshahi et al. 2022, Algorithm 1) from a data file",
-        description=read_ik_file.__doc__.split("\n\n")[0].replace("``", "'"),
+        description="Estimate the IK weights of every item (participant, condition, target) of a data file: "
+        + plain(read_ik_file.__doc__.split("\n\n")[0]),
         epilog=example_help("ik_example.csv"),
     )
     p.add_argument("file", help=".mat (the paper's layout), .npz or .csv")
@@ -179,6 +209,7 @@ def _ik_weights(args) -> int:
     if not 0.0 <= args.gamma <= 1.0:
         raise ValueError(f"--gamma must lie in [0, 1], got {args.gamma}")
     d = read_ik_file(args.file)
+    out = output_dir("--out", args.out)
     if args.method == "lm":
         res = estimate_ik_weights_lm(d["qdot"], d["xdot"], d["J"], args.gamma, mask=d["mask"])
         error = np.asarray(res.cost)
@@ -188,16 +219,14 @@ def _ik_weights(args) -> int:
     status = np.asarray(getattr(res, "status", np.where(np.asarray(res.converged), 0, 2)))
     w = np.asarray(res.w)
     beta = np.asarray(contribution_coefficients(np.where(np.isfinite(w), w, 1.0)))
-    out = Path(args.out)
-    out = output_dir("--out", out)
     rows = [{"item": lab, "status": pj.status_message(int(status[i])), "converged": bool(res.converged[i]),
              **{f"w_{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
              **{f"beta_{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
              "error": f"{float(error[i]):.4g}"} for i, lab in enumerate(d["labels"])]
     _write_csv(out / "ik_weights.csv", rows)
     n_ok = int(np.asarray(res.converged).sum())
-    print(f"{n_ok}/{len(rows)} items converged; wrote {out / 'ik_weights.csv'}")
-    return 0
+    print(f"{n_ok} of {plural(len(rows), 'item')} converged; wrote {out / 'ik_weights.csv'}")
+    return 0 if n_ok == len(rows) else 1
 
 
 # ----------------------------------------------------------------------------- analyze-pointing
@@ -208,7 +237,7 @@ def add_analyze_pointing(sub) -> None:
         "analyze-pointing", help="analyse a wrist-pointing recording (curvature, t-tests; with a Donders "
         "session: the Donders-fitted λ0-PMP's predictions and fitted time constants)",
         description="Section 2 'Data Analysis' of Tommasino & Campolo (2017) on a pointing recording (CSV or "
-        "NPZ, see pmpjax.read_pointing): segmentation at 20 %% of peak speed, curvature A_sum/A_net, "
+        "NPZ, see pmpjax.read_pointing): segmentation at 20 % of peak speed, curvature A_sum/A_net, "
         "hysteresis, t-tests. With --donders (a Donders recording of the same subjects): KJ and q_rest by "
         "NIO, every movement predicted with τ = τ0 = T/5, captured counts, and τ0, τ fitted per subject. "
         "CSV columns: subject,trial,time,qw,qx,qy,qz,target, one row per IMU sample (time [s] from the start of "
@@ -220,7 +249,8 @@ def add_analyze_pointing(sub) -> None:
     p.add_argument("file", help="pointing recording (.csv or .npz)")
     p.add_argument("--donders", help="Donders recording of the same subjects (.csv or .npz)")
     p.add_argument("--out", default="out_pointing", help="output folder (default out_pointing)")
-    p.add_argument("--starts", type=int, default=2, help="LM starts per subject of the Donders fit (default 2)")
+    p.add_argument("--starts", type=positive_int, default=2,
+                   help="LM starts per subject of the Donders fit (default 2)")
     p.add_argument("--no-figures", action="store_true", help="no Figures 5-8")
     p.add_argument("--skip-invalid", action="store_true",
                    help="drop trials with invalid samples (listed in excluded.txt) instead of stopping")
@@ -270,7 +300,7 @@ def _analyze_pointing(args) -> int:
     _write_csv(out / "pointing_statistics.csv",
                an.statistics_rows(None if pred is None else {"T5": heuristic, "fitted": pred}))
     (out / "pointing_statistics.txt").write_text(text + "\n")
-    (out / "excluded.txt").write_text("".join(f"{e}\n" for e in an.excluded))
+    (out / "excluded.txt").write_text("".join(f"{reason}\n" for *_, reason in an.excluded))
     if not args.no_figures:
         for i, s in enumerate(an.subjects):
             for tag, plot in (("figure5_paths", plot_pointing_paths), ("figure6_curvature", plot_pointing_curvature),
@@ -278,9 +308,11 @@ def _analyze_pointing(args) -> int:
                 fig = plot(an, pred, subject=i)
                 fig.savefig(out / f"{tag}_{s}.png", dpi=90)
                 plt.close(fig)
-    print(f"{len(an.subjects)} subjects, {int(an.valid.sum())} movements analysed, {len(an.excluded)} exclusions "
-          f"(excluded.txt); wrote {out / 'pointing_statistics.csv'}" + ("" if tc is None else ", time_constants.csv"))
-    return 0 if tc is None or bool(np.all(tc.converged)) else 1
+    print(f"{plural(len(an.subjects), 'subject')}, {plural(int(an.valid.sum()), 'movement')} analysed, "
+          f"{plural(len(an.excluded), 'exclusion')} (excluded.txt); wrote {out / 'pointing_statistics.csv'}"
+          + ("" if tc is None else ", time_constants.csv"))
+    converged = True if tc is None else bool(np.all(tc.converged) and np.all(np.asarray(fit.converged)[order]))
+    return 0 if converged else 1
 
 
 def add_commands(sub) -> None:

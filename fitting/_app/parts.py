@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import Part
+from pmpjax.internal import Part, plural, write_json
 
 
 def _ik_hugmp(ctx) -> dict:
@@ -345,8 +345,9 @@ def _pointing(ctx) -> dict:
     ctx.figure(plot_pointing_speed(an, fitted, subject=0), f"pointing_figure8_speed_{an.subjects[0]}.png",
                f"{an.subjects[0]}: tangential speed profiles of all 16 movements, model dashed.",
                "Paper Figure 8.", dpi=90)
-    ctx.log(f"{len(an.subjects)} subjects, {int(an.valid.sum())} movements analysed, {len(an.excluded)} "
-            f"exclusions; Donders fits converged {int(fit.converged.sum())}/{len(fit.converged)}; captured of 16: "
+    ctx.log(f"{plural(len(an.subjects), 'subject')}, {plural(int(an.valid.sum()), 'movement')} analysed, "
+            f"{plural(len(an.excluded), 'exclusion')}; Donders fits converged {int(fit.converged.sum())}/"
+            f"{len(fit.converged)}; captured of 16: "
             f"T/5 {heuristic.n_captured.tolist()}, fitted τ {fitted.n_captured.tolist()}; τ0 fit/true "
             + ", ".join(f"{a:.3f}/{b:.3f}" for a, b in zip(tc.tau0, truth["tau0"][:, 0])))
     return {
@@ -397,7 +398,7 @@ def _reaching(ctx) -> dict:
               "Donders-law prediction of the final posture.",
               "Not in the papers: the λ0-PMP tested on whole-arm reaching. Every variant of the model against "
               "these baselines, with paired tests: benchmarks/reaching.py --table.")
-    (ctx.out / "reaching_hugmp_summary.json").write_text(json.dumps(rows, indent=1))
+    write_json(ctx.out / "reaching_hugmp_summary.json", rows)
     for s in dict.fromkeys(pred.subject.tolist()):
         ctx.figure(plot_reaching_subject(pred, s, predictors=("model", "pinv_minjerk", "joint_minjerk_oracle")),
                    f"reaching_hugmp_{s}.png",

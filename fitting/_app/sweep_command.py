@@ -39,14 +39,23 @@ from __future__ import annotations
 import argparse
 import csv
 import itertools
-import json
 import math
 import re
 from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import ConfigError, build_simulation, check_rk4_stability, example_help, output_dir, read_config
+from pmpjax.internal import (
+    ConfigError,
+    build_simulation,
+    check_rk4_stability,
+    example_help,
+    output_dir,
+    plain,
+    plural,
+    read_config,
+    write_json,
+)
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
@@ -316,7 +325,7 @@ def run_sweep_config(path, out=None, *, progress: bool = False) -> dict:
     if 1 <= len(axes) <= 2:
         _plot(out / "sweep.png", params, axes, res.outputs[metrics[0]], metrics[0], names)
         summary["figure"] = "sweep.png"
-    (out / "sweep.json").write_text(json.dumps(summary, indent=1))
+    write_json(out / "sweep.json", summary)
     return summary
 
 
@@ -360,7 +369,8 @@ def _plot(path, params, axes, values, metric, names):
 
 def add_sweep(sub) -> None:
     p = sub.add_parser("sweep", help="sweep model/planner parameters of movements described in a TOML/JSON "
-                       "file (chunked, resumable)", description=__doc__, epilog=example_help("sweep_figure3.toml"),
+                       "file (chunked, resumable)", description=plain(__doc__),
+                       epilog=example_help("sweep_figure3.toml"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", help="TOML or JSON file ([chain], [model], [planner], [simulation], [sweep])")
     p.add_argument("--out", help="output folder (default: sweep.out of the file, else out_sweep)")
@@ -371,9 +381,10 @@ def add_sweep(sub) -> None:
 
         jax.config.update("jax_enable_x64", True)
         s = run_sweep_config(args.config, args.out, progress=not args.no_progress)
-        print(f"{s['rows']} parameter rows ({s['chunks_computed']} chunks computed, {s['chunks_reused']} reused), "
-              f"{s['failed']} failed; wrote {Path(s['out']) / 'sweep.csv'}, sweep.json"
+        print(f"{plural(s['rows'], 'parameter row')} ({plural(s['chunks_computed'], 'chunk')} computed, "
+              f"{s['chunks_reused']} reused), {s['failed']} failed; wrote {Path(s['out']) / 'sweep.csv'}, sweep.json"
               + (", sweep.png" if "figure" in s else ""))
         return 0 if s["failed"] == 0 else 1
 
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, resume=lambda args: "the finished chunks are kept in the output folder's store; run "
+                   "the same command again to compute the others")

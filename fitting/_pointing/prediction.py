@@ -133,7 +133,8 @@ class PointingPrediction:
         for s, name in enumerate(self.subjects):
             caught = [lab for lab, c in zip(self.labels, self.captured[s]) if c]
             out.append(f"{name}: model captures A_net of {int(self.n_captured[s])} of {len(self.labels)} movements "
-                       f"({100 * self.share_captured[s]:.0f} %; {int(self.n_tested[s])} tested): {', '.join(caught)}")
+                       f"({100 * self.share_captured[s]:.0f} %; {int(self.n_tested[s])} tested)"
+                       + (f": {', '.join(caught)}" if caught else ""))
         return "\n".join(out)
 
 

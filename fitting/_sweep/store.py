@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pmpjax.internal import output_dir
+
 FORMAT = "pmpjax sweep v1"
 _SHARD = re.compile(r"^(\d{6,})-([0-9a-f]{32})\.npz$")
 
@@ -104,6 +106,7 @@ class _Store:
         root = Path(out)
         if root.exists() and not root.is_dir():
             raise ValueError(f"`out`={str(out)!r} is a file, not a sweep store directory")
+        output_dir("out", root)  # (created and writable: a store that cannot be written fails before any work)
         mpath = root / "manifest.json"
         if mpath.exists():
             try:

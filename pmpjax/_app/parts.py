@@ -162,12 +162,17 @@ def run_part(name: str, part, ctx: PartContext) -> dict:
             entry.update(converged=list(c), all_converged=c[0] == c[1])
         entry["results"] = res
     except Exception as e:  # a failing part is reported; the others still run
-        (ctx.out / f"{name}.error.txt").write_text(traceback.format_exc())
+        error_file = ctx.out / f"{name}.error.txt"
+        try:
+            error_file.write_text(traceback.format_exc())
+            where = f"traceback in {error_file}"
+        except OSError as write_error:
+            where = f"its traceback could not be written: {write_error.strerror}"
         entry.update(status="failed", error=f"{type(e).__name__}: {e}")
         from rich.markup import escape
 
         ctx._console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))} "  # noqa: SLF001
-                           f"(traceback in {ctx.out / (name + '.error.txt')})")
+                           f"({escape(where)})")
     entry["seconds"] = round(time.perf_counter() - t0, 2)
     entry["artefacts"] = [dataclasses.asdict(a) for a in ctx.artefacts]
     entry["doc"] = doc

@@ -22,7 +22,7 @@ INTRO = (
 #: Files listed under "Other files" at most (an output folder may hold much else).
 MAX_OTHER_FILES = 300
 
-_CODE = re.compile(r"``(.+?)``|`([^`\n]+)`")
+_MARKUP = re.compile(r"``(.+?)``|`([^`\n]+)`|\*\*(.+?)\*\*")
 _INT = re.compile(r"[+-]?\d+")
 _FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 
@@ -57,10 +57,12 @@ def part_status(entry: dict) -> tuple[str, str]:
 
 
 def _inline(text: str) -> str:
-    """``text`` as HTML, its RST or Markdown inline code (double or single backticks) as ``<code>``."""
+    """``text`` as HTML: its RST or Markdown inline code (double or single backticks) as ``<code>``,
+    Markdown ``**bold**`` as ``<b>``."""
     out, pos = [], 0
-    for m in _CODE.finditer(text):
-        out += [html.escape(text[pos:m.start()]), f"<code>{html.escape(m[1] or m[2])}</code>"]
+    for m in _MARKUP.finditer(text):
+        tag = "b" if m[3] else "code"
+        out += [html.escape(text[pos:m.start()]), f"<{tag}>{html.escape(m[1] or m[2] or m[3])}</{tag}>"]
         pos = m.end()
     return "".join(out) + html.escape(text[pos:])
 

@@ -9,6 +9,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
+from .._base.jsontext import json_text
 from .._base.validate import output_dir
 from .display import Display
 from .parts import PartContext, as_part, available_parts, run_part
@@ -81,7 +82,13 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
     out = Path(out)
     out = output_dir("--out", out)
     results_path = out / "results.json"
-    results = json.loads(results_path.read_text()) if results_path.exists() else {}
+    try:
+        results = json.loads(results_path.read_text()) if results_path.exists() else {}
+        if not isinstance(results, dict):
+            raise ValueError("not a JSON object")
+    except ValueError as e:
+        raise ValueError(f"{results_path}: not a results file of pmpjax ({e}); delete it or use another "
+                         "--out") from None
     meta = results.setdefault("_meta", {})
     meta.update({"versions": _versions(), "seed": seed, "quick": quick})
     t_run = time.perf_counter()
@@ -103,9 +110,13 @@ def reproduce(out: str | os.PathLike = "out", *, quick: bool = False, force: boo
         results.clear()
         results.update(ordered)
         # Written after every part so an interruption loses nothing already computed.
-        _atomic_write(results_path, json.dumps(results, indent=2, default=json_default))
+        _atomic_write(results_path, json_text(results, indent=2))
         write_report(out, results)
 
+    # The report must not link an earlier run's traceback or messages of a part that runs again.
+    stale = [p for name in todo for p in (out / f"{name}.error.txt", out / "_logs" / f"{name}.log")]
+    for path in stale + (list((out / "_logs").glob("worker-*.log")) if todo else []):
+        path.unlink(missing_ok=True)
     n_workers = min(jobs, len(todo))
     meta["jobs"] = max(n_workers, 1)
     ui.begin(len(todo))
@@ -148,14 +159,3 @@ def _atomic_write(path: Path, text: str) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
-
-
-def json_default(o):
-    """JSON for NumPy/JAX arrays and scalars (lists); anything else as its string."""
-    import numpy as np
-
-    if isinstance(o, np.ndarray | np.generic):
-        return o.tolist()
-    if hasattr(o, "tolist"):
-        return o.tolist()
-    return str(o)

@@ -35,7 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .._base.jsontext import write_json
 from .._base.validate import check_spd, input_file, output_dir, read_text_file
+from .text import plain, plural
 
 
 def example_help(name: str) -> str:
@@ -264,13 +266,13 @@ def run_simulation_config(path, out) -> dict:
         "final_q": q[:, -1].tolist(),
         "status": [pj.status_message(int(s)) for s in np.asarray(traj.status).reshape(-1)],
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / "summary.json", summary, indent=2)
     return summary
 
 
 def add_simulate_command(sub) -> None:
     p = sub.add_parser("simulate", help="simulate movements described in a TOML/JSON file",
-                       description=__doc__, epilog=example_help("simulate_figure3.toml"),
+                       description=plain(__doc__), epilog=example_help("simulate_figure3.toml"),
                        formatter_class=__import__("argparse").RawDescriptionHelpFormatter)
     p.add_argument("config", help="TOML or JSON configuration file")
     p.add_argument("--out", default="out_simulate", help="output folder (default out_simulate)")
@@ -278,10 +280,14 @@ def add_simulate_command(sub) -> None:
     def run(args) -> int:
         import jax
 
+        from .._base.status import Status
+
         jax.config.update("jax_enable_x64", True)
         s = run_simulation_config(args.config, args.out)
-        print(f"{len(s['targets'])} movements, max final task error {max(s['final_task_error']):.2e}; "
-              f"wrote {args.out}/trajectories.csv, paths.png, summary.json")
-        return 0
+        failed = sum(status != Status.SUCCESSFUL.message for status in s["status"])
+        print(f"{plural(len(s['targets']), 'movement')}, max final task error {max(s['final_task_error']):.2e}"
+              + (f", {failed} not successful (summary.json says why)" if failed else "")
+              + f"; wrote {Path(args.out) / 'trajectories.csv'}, paths.png, summary.json")
+        return 1 if failed else 0
 
     p.set_defaults(func=run)

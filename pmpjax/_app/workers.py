@@ -1,19 +1,19 @@
 """The main job's worker processes: spawned, each pinned to its share of the cores, ending with
-the parent; their output goes to log files, their log lines and progress bars to the parent's
-display over a queue."""
+the parent; their output goes to a log file per part, their log lines and progress bars to the
+parent's display over a queue. Ctrl-C is the parent's to handle: it ends the workers."""
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import sys
 import time
 import traceback
 from pathlib import Path
 
+from .._base.jsontext import json_safe
 from .parts import PartContext, as_part, portable, run_part
-from .reproduce import enable_compilation_cache, json_default
+from .reproduce import enable_compilation_cache
 
 _WORKER: dict = {}
 
@@ -50,26 +50,39 @@ def _pin_to_share(slot: int, n_workers: int) -> None:
 
 def _worker_init(queue, cache_dir, log_dir, parent=None, slot=None, n_workers=1) -> None:
     """Set up a spawned worker like the parent: float64, the compilation cache, Agg; its stdout and
-    stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log``, not the console; it
-    ends with ``parent``; with a ``slot`` it runs on its share of the cores (set before JAX sizes
-    its thread pools)."""
+    stderr (JAX, XLA and MuJoCo messages) go to ``log_dir/worker-PID.log`` (``PART.log`` while it
+    runs a part), not the console; it ends with ``parent`` and ignores Ctrl-C (the parent, which
+    gets it too, ends the workers); with a ``slot`` it runs on its share of the cores (set before
+    JAX sizes its thread pools)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if parent is not None:
         _die_with_parent(parent)
     if slot is not None:
         _pin_to_share(slot, n_workers)
     os.environ.setdefault("MPLBACKEND", "Agg")
-    log = open(Path(log_dir) / f"worker-{os.getpid()}.log", "a", buffering=1)  # noqa: SIM115
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os.dup2(log.fileno(), 1)
-    os.dup2(log.fileno(), 2)
-    sys.stdout = sys.stderr = log
+    _WORKER["log_dir"] = Path(log_dir)
+    _log_to(Path(log_dir) / f"worker-{os.getpid()}.log")
     import jax
 
     jax.config.update("jax_enable_x64", True)
     if cache_dir is not None:
         enable_compilation_cache(cache_dir)
     _WORKER["queue"] = queue
+
+
+def _log_to(path: Path) -> None:
+    """Send this process's stdout and stderr (Python's and the C libraries') to ``path``."""
+    log = open(path, "a", buffering=1)  # noqa: SIM115
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.dup2(log.fileno(), 1)
+    os.dup2(log.fileno(), 2)
+    old, sys.stdout = sys.stdout, log
+    sys.stderr = log
+    if old is not sys.__stdout__:
+        old.close()
 
 
 class _QueueConsole:
@@ -104,8 +117,12 @@ def _worker_run(name: str, part, out: str, quick: bool, seed: int) -> dict:
     console = _QueueConsole(queue)
     ctx = PartContext(name, Path(out), quick=quick, seed=seed, console=console,
                       progress_factory=_queue_progress(queue, name))
-    entry = run_part(name, part, ctx)
-    return json.loads(json.dumps(entry, default=json_default))  # (plain data back to the parent)
+    _log_to(_WORKER["log_dir"] / f"{name}.log")
+    try:
+        entry = run_part(name, part, ctx)
+    finally:
+        _log_to(_WORKER["log_dir"] / f"worker-{os.getpid()}.log")
+    return json_safe(entry)  # (plain data back to the parent)
 
 
 def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, record) -> None:
@@ -145,9 +162,9 @@ def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, r
                 "artefacts": [], "doc": doc}
 
     def crashed(name):
-        ui.console.print(f"[bold red]{name}: FAILED[/] its worker process crashed (messages in {log_dir})")
-        return failed(name, f"worker process crashed (messages in {log_dir})",
-                      as_part(parts[name]).doc)
+        log = log_dir / f"{name}.log"
+        ui.console.print(f"[bold red]{name}: FAILED[/] its worker process crashed (messages in {escape(str(log))})")
+        return failed(name, f"worker process crashed (messages in {log})", as_part(parts[name]).doc)
 
     def collect(fut, name) -> bool:
         """Record the part of a finished future; False if its worker crashed."""
@@ -157,7 +174,8 @@ def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, r
             ui.finished(name)
             return False
         except Exception as e:  # (the part could not be sent or its results not returned)
-            (out / f"{name}.error.txt").write_text(traceback.format_exc())
+            with contextlib.suppress(OSError):
+                (out / f"{name}.error.txt").write_text(traceback.format_exc())
             entry = failed(name, f"{type(e).__name__}: {e}")
             ui.console.print(f"[bold red]{name}: FAILED[/] {type(e).__name__}: {escape(str(e))}")
         ui.finished(name)
@@ -169,6 +187,7 @@ def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, r
         t_start.setdefault(name, time.perf_counter())
         return pool.submit(_worker_run, name, portable(parts[name]), str(out), quick, seed)
 
+    others = set(mp.active_children())  # (the manager's process; any of the caller's)
     pools = [worker(i, n_workers) for i in range(n_workers)]
     suspects: list[str] = []
     try:
@@ -214,13 +233,17 @@ def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, r
             if not collect(send(pool, name), name):
                 record(name, crashed(name))
             pool.shutdown(wait=False, cancel_futures=True)
+    except BaseException:  # (Ctrl-C, or the parent failed): a part still running must not hold up the exit
+        for proc in set(mp.active_children()) - others:
+            proc.terminate()
+        raise
     finally:
         for pool in pools:
             pool.shutdown(wait=False, cancel_futures=True)
         queue.put(None)
         pump.join(timeout=5)
         manager.shutdown()
-        for log in log_dir.glob("worker-*.log"):
+        for log in log_dir.glob("*.log"):
             if log.stat().st_size == 0:
                 log.unlink()
         with contextlib.suppress(OSError):

@@ -179,24 +179,57 @@ def input_file(name: str, path) -> Path:
 
 
 def read_text_file(path: Path) -> str:
-    """The UTF-8 text of ``path``; ``ValueError`` naming the file and the offending byte otherwise
-    (a binary file given where text is expected)."""
+    """The UTF-8 text of ``path``; ``ValueError`` naming the file otherwise: a binary file (a NUL
+    byte) as binary, UTF-16 or text in another encoding by its encoding or first non-UTF-8 byte."""
     data = path.read_bytes()
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ValueError(f"{path}: UTF-16 text, not UTF-8; save it as UTF-8")
+    if (i := data.find(b"\x00")) >= 0:
+        line = data[:i].count(b"\n") + 1
+        raise ValueError(f"{path}: a binary file (NUL byte at byte {i}, line {line}), not a text file")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = data[: e.start].count(b"\n") + 1
-        raise ValueError(f"{path}: not a UTF-8 text file (line {line}, byte {e.start}: {data[e.start:e.start + 1]!r}; "
-                         "binary data?)") from None
+        raise ValueError(f"{path}: not a UTF-8 text file (line {line}, byte {e.start}: {data[e.start:e.start + 1]!r}): "
+                         "text in another encoding (Latin-1, Windows-1252)? save it as UTF-8") from None
+
+
+def open_npz(path):
+    """The arrays of the NPZ archive ``path`` (``np.load``, no pickles), to use in a ``with``;
+    ``ValueError`` naming the file when it is not one (a zip of ``.npy`` arrays, as ``numpy.savez``
+    writes)."""
+    import zipfile
+
+    with open(path, "rb") as f:
+        magic = f.read(6)
+    if not magic.startswith((b"PK\x03\x04", b"PK\x05\x06")):
+        what = "a single .npy array" if magic == b"\x93NUMPY" else "not a zip archive"
+        raise ValueError(f"{path}: not an NPZ archive ({what}; expected the zip of .npy arrays that numpy.savez "
+                         "writes)")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        raise ValueError(f"{path}: not a readable NPZ archive ({e})") from None
 
 
 def output_dir(name: str, path) -> Path:
-    """The folder ``path``, created if missing; ``ValueError`` naming ``name`` when it is a file."""
+    """The folder ``path``, created if missing and checked writable (a probe file is created and
+    removed), so that a command fails before its work rather than after it; ``ValueError`` naming
+    ``name`` when it is a file or cannot be created or written to."""
+    import tempfile
+
     path = as_path(name, path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"`{name}`: {path} is a file, not a folder")
     try:
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"`{name}`: {path} is a file, not a folder")
         path.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ValueError(f"`{name}`: cannot create the folder {path} ({e.strerror})") from None
+    try:
+        fd, probe = tempfile.mkstemp(dir=path, prefix=".write-check-")
+    except OSError as e:
+        raise ValueError(f"`{name}`: cannot write to the folder {path} ({e.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
     return path

@@ -208,11 +208,7 @@ def read_joint_angles(path, *, subject: str | None = None, joints=None, max_gap:
         i = raw.index(b"\x00")
         line = raw[:i].count(b"\n") + 1
         raise ValueError(f"{path}: a binary file (NUL byte at byte {i}, line {line}), not a {ext} text file")
-    try:
-        text = read_text_file(path)
-    except ValueError as e:  # text (no NUL bytes) in another encoding
-        raise ValueError(f"{e}; no NUL bytes, so likely text in another encoding (Latin-1, Windows-1252): "
-                         "save it as UTF-8") from None
+    text = read_text_file(path)  # (text in another encoding is refused by its first non-UTF-8 byte)
     table = _parse_opensim(path, text) if ext in (".mot", ".sto") else _parse_csv(path, text)
     return _build(path, table, subject or path.stem, path.stem, wanted, float(max_gap), float(sample_tol))
 

@@ -43,6 +43,7 @@ from .._base.validate import (
     check_spd,
     csv_floats,
     input_file,
+    open_npz,
     read_text_file,
 )
 from .._chains.kinematics import Wrist
@@ -232,11 +233,7 @@ def read_recordings(path) -> DondersRecording:
 
 
 def _read_npz(path):
-    try:
-        z = np.load(path, allow_pickle=False)
-    except Exception as e:  # noqa: BLE001 - numpy raises several types for corrupt files
-        raise ValueError(f"{path}: not a readable .npz file ({e})") from e
-    with z:
+    with open_npz(path) as z:
         missing = [k for k in ("subjects", "quat", "pointing", "mask") if k not in z.files]
         if missing:
             raise ValueError(f"{path}: missing array(s) {missing}; expected subjects, quat, pointing, mask")
@@ -292,13 +289,14 @@ def _read_csv(path):
     has_j = all(c in col for c in _JOINT_COLS)
     need = ["subject", "sample", "x1", "x2"]
     missing = [c for c in need if c not in col]
-    if missing or not (has_q or has_j):
-        raise ValueError(
-            f"{path}: line {lines[0][0]}: header {header} lacks column(s) "
-            f"{missing + ([] if has_q or has_j else ['qw,qx,qy,qz or q_ps,q_fe,q_rud'])}"
-        )
     known = {*need, *_QUAT_COLS, *_JOINT_COLS}
     unknown = [c for c in header if c not in known]
+    if missing or not (has_q or has_j):
+        raise ValueError(
+            f"{path}: line {lines[0][0]}: header line lacks column(s) "
+            f"{missing + ([] if has_q or has_j else ['qw,qx,qy,qz or q_ps,q_fe,q_rud'])}"
+            + (f" and has unknown column(s) {unknown} (renamed?)" if unknown else "")
+        )
     if unknown:  # (a renamed column would otherwise be ignored silently)
         raise ValueError(f"{path}: line {lines[0][0]}: unknown column(s) {unknown}; expected "
                          f"{', '.join(need)} and {','.join(_QUAT_COLS)} or {','.join(_JOINT_COLS)}")

@@ -47,7 +47,7 @@ import numpy as np
 from .._base.batching import bucket, head_rows, pad_rows
 from .._base.compile import fast_compile_jit
 from .._base.pytree import replace
-from .._base.validate import check_positive_int, input_file, is_concrete, read_text_file
+from .._base.validate import check_positive_int, input_file, is_concrete, open_npz, read_text_file
 from .._chains.kinematics import Wrist
 from .._pmp.equilibria import equilibrium_posture
 from .._pmp.models import Lambda0PMP
@@ -278,11 +278,7 @@ def read_pointing(path, *, on_invalid: str = "raise") -> PointingRecording:
 
 
 def _read_npz(path):
-    try:
-        z = np.load(path, allow_pickle=False)
-    except Exception as e:  # noqa: BLE001 - numpy raises several types for corrupt files
-        raise ValueError(f"{path}: not a readable .npz file ({e})") from e
-    with z:
+    with open_npz(path) as z:
         if "format" in z.files and str(z["format"]) != FORMAT:
             raise ValueError(f"{path}: unknown format {str(z['format'])!r}, expected {FORMAT!r}")
         missing = [c for c in COLUMNS if c not in z.files]
@@ -337,9 +333,11 @@ def _read_csv(path):
     if len(set(header)) != len(header):
         raise ValueError(f"{path}:{lines[0]}: duplicate column names in header {header}")
     missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise ValueError(f"{path}:{lines[0]}: header {header} lacks column(s) {missing}")
     unknown = [c for c in header if c not in COLUMNS]
+    if missing:
+        raise ValueError(f"{path}:{lines[0]}: header line lacks column(s) {missing}"
+                         + (f" and has unknown column(s) {unknown} (renamed?)" if unknown else "")
+                         + f"; the columns are {', '.join(COLUMNS)}")
     if unknown:  # (lab exports carry extra columns: read on, but never silently)
         import warnings
 
