@@ -24,7 +24,11 @@ rate of the λ0-PMP scales with ``1/τ0`` apart from the planner's ``t/τ`` (see
 identify ``τ/τ0`` and the duration identifies ``τ0``.
 
 All items (subjects, or subjects × movements) are fitted in one ``jit``+``vmap`` call, each with
-its own convergence, status and Gauss–Newton standard errors (delta method from the log scale).
+its own convergence, status and standard errors (delta method from the log scale): per subject
+clustered by movement (the sandwich of :func:`_clustered_se`: a movement's residual entries share
+its trial-to-trial variability, so Gauss–Newton errors that treat them as independent come out
+2–3 times too small against the spread over replicate experiments, tests/test_pointing.py);
+per subject × movement Gauss–Newton.
 """
 
 from __future__ import annotations
@@ -120,6 +124,27 @@ def _fit_items(theta0, KJ, q_rest, data, *, opts, max_steps):
     return jax.vmap(one)(theta0, KJ, q_rest, data)
 
 
+def _clustered_se(jac, residual, w, n):
+    """(items, 2) standard errors of (log τ0, log τ) with the residual clustered by movement.
+
+    The residual of a movement (its path, speed profile and duration against the means over its
+    trials) is correlated along the movement: its error is mostly the movement's own trial-to-trial
+    variability, shared by all of its samples, so the Gauss–Newton ``σ² (JᵀJ)⁻¹`` (independent
+    entries) understates the spread of the estimates several times. Instead, the sandwich
+    ``(JᵀJ)⁻¹ (Σ_m g_m g_mᵀ) (JᵀJ)⁻¹ · M/(M − 2)`` with ``g_m = J_mᵀ r_m`` summed over movement m's
+    entries, over the M movements with data (``w`` (items, L) > 0)."""
+    items, L = w.shape
+    cluster = np.concatenate([np.repeat(np.arange(L), 2 * n), np.repeat(np.arange(L), n), np.arange(L)])
+    g = np.zeros((items, L, jac.shape[-1]))
+    for i in range(items):
+        np.add.at(g[i], cluster, jac[i] * residual[i][:, None])
+    M = w.astype(bool).sum(1)
+    with np.errstate(all="ignore"):
+        bread = np.linalg.pinv(np.einsum("bki,bkj->bij", jac, jac))
+        cov = bread @ np.einsum("bmi,bmj->bij", g, g) @ bread * (M / np.maximum(M - 2, 1))[:, None, None]
+    return np.sqrt(np.abs(np.diagonal(cov, axis1=1, axis2=2)))
+
+
 def _solver(KJ, q_rest, tau0, tau, data, d) -> str:
     """``"rk4"`` when RK4 at ``FIT_DT`` is stable for every movement at the starting time constants
     ``tau0``, ``tau`` (items,) [s] (``data`` as :func:`_item_data`'s), else the L-stable
@@ -198,6 +223,8 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     status = np.where(~has, int(Status.TOO_FEW_DATA), np.where(
         ~finite, int(Status.NONFINITE), np.where(res.converged, int(Status.SUCCESSFUL), int(Status.MAX_STEPS))))
     bad = ~has | ~finite
+    if not per_target:  # one (τ0, τ) per subject: movement-clustered standard errors (see below)
+        se_log = _clustered_se(np.asarray(res.jac), np.asarray(res.residual), data["w"], analysis.mean_path.shape[2])
     tau = np.where(bad[:, None], np.nan, tau)
     stderr = np.where(bad[:, None], np.nan, tau * se_log)
     loss = np.where(bad, np.nan, res.cost)
