@@ -31,6 +31,8 @@ from ._ik.weights import ik_model_error as ik_model_error
 from ._movements import MovementFit as MovementFit
 from ._movements import MovementPrediction as MovementPrediction
 from ._movements import fit_movements as fit_movements
+from ._movements import plot_movement_parameters as plot_movement_parameters
+from ._movements import plot_movements as plot_movements
 from ._movements import predict_movements as predict_movements
 from ._optimise import LeastSquaresResult as LeastSquaresResult
 from ._optimise import covariance as covariance

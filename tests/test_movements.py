@@ -91,7 +91,8 @@ def test_held_out_final_postures_and_paths(case):
     assert np.median(pr.rmse_deg) < 1.0 and np.median(pr.rmse_deg) <= 0.5 * np.median(pinv), (pr.rmse_deg, pinv)
 
 
-@pytest.mark.bad_input("fitting.fit_movements", "fitting.predict_movements")
+@pytest.mark.bad_input("fitting.fit_movements", "fitting.predict_movements", "fitting.plot_movements",
+                       "fitting.plot_movement_parameters")
 def test_bad_arguments_are_refused_by_name(case):
     _, fit, test, _ = case
     chain = pj.ShoulderElbowArm()
@@ -107,3 +108,7 @@ def test_bad_arguments_are_refused_by_name(case):
         fitting.fit_movements(chain, [np.zeros((10, 4))])
     with pytest.raises(TypeError, match="`fit`"):
         fitting.predict_movements("fit", [test])
+    with pytest.raises(TypeError, match="`fit`"):
+        fitting.plot_movement_parameters("fit")
+    with pytest.raises(TypeError, match="`pred`"):
+        fitting.plot_movements(fit, "P1")

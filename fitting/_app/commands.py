@@ -320,6 +320,8 @@ def add_commands(sub) -> None:
     add_fit_donders(sub)
     add_ik_weights(sub)
     add_analyze_pointing(sub)
+    from .movements_command import add_fit_movements
     from .sweep_command import add_sweep
 
+    add_fit_movements(sub)
     add_sweep(sub)

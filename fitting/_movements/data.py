@@ -3,8 +3,9 @@
 Each reach found by :func:`pmpjax.find_movements` is cut out from ``ONSET_LEAD`` before its onset
 (the hand at rest; the model's target-onset ``delay`` absorbs the fixed lead) to the next reach's
 window start (the hold on the target), in the recording's own clock, and resampled at ``SAMPLES``
-equally spaced times by linear interpolation of the recorded joint angles. Reaches cut short by the next one (the hand still
-moving when the next target appeared) are left out with their reason: their target is unknown.
+equally spaced times by linear interpolation of the recorded joint angles. Reaches cut short by
+the next one (the hand still moving when the next target appeared) are left out with their
+reason: their target is unknown.
 """
 
 from __future__ import annotations

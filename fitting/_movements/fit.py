@@ -133,10 +133,12 @@ class MovementFit:
                 "subject": s, "status": status_message(int(self.status[a])), "converged": bool(self.converged[a]),
                 "reaches": int(self.n_reaches[a]), f"tau0 [{unit}]": float(self.tau0[a]),
                 f"tau [{unit}]": float(self.tau[a]), f"delay [{unit}]": float(self.delay[a]),
-                "train_rmse [deg]": float(self.rmse_deg[a]), "integration_error [deg]": float(self.integration_error_deg[a]),
+                "train_rmse [deg]": float(self.rmse_deg[a]),
+                "integration_error [deg]": float(self.integration_error_deg[a]),
                 "cond KJ": float(np.linalg.cond(self.KJ[a])) if np.all(np.isfinite(self.KJ[a])) else math.nan,
                 "aic": float(self.aic[a]), "bic": float(self.bic[a]),
-                "lm_steps": int(self.lm_steps[a].sum()), "unidentified": "; ".join(" + ".join(d) for d in self.unidentified[a]),
+                "lm_steps": int(self.lm_steps[a].sum()),
+                "unidentified": "; ".join(" + ".join(d) for d in self.unidentified[a]),
             })
         return rows
 

@@ -9,6 +9,7 @@ final posture (exact end posture by construction: an upper bound for the path).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -31,7 +32,9 @@ class MovementPrediction:
     (N,) RMS over joints of the final posture's error; ``status`` (N,) (``pmpjax.Status`` of the
     simulation; NaN errors where it is not ``SUCCESSFUL``); ``baselines`` {name: dict of
     ``q_pred``, ``rmse_deg``, ``final_error_deg``, ``status``}; ``skipped`` {recording:
-    [(t_from, t_to, reason)]}; ``problems`` {subject: message} (subjects not in the fit).
+    [(t_from, t_to, reason)]}; ``problems`` {subject: message} (subjects not in the fit); ``chain``
+    the fit's chain. Tables: :meth:`summary`, :meth:`movement_rows`; figure:
+    :func:`fitting.plot_movements`.
     """
 
     subject: np.ndarray
@@ -45,9 +48,45 @@ class MovementPrediction:
     baselines: dict
     skipped: dict
     problems: dict
+    chain: object = None
 
     def __len__(self):
         return int(self.rmse_deg.shape[0])
+
+    def predictors(self) -> dict:
+        """``{"model": ..., **baselines}``, each a dict of ``q_pred``, ``rmse_deg``,
+        ``final_error_deg``, ``status``."""
+        model = dict(q_pred=self.q_pred, rmse_deg=self.rmse_deg, final_error_deg=self.final_error_deg,
+                     status=self.status)
+        return {"model": model, **self.baselines}
+
+    def movement_rows(self) -> list[dict]:
+        """One row per reach: subject, recording, window [s], and each predictor's RMSE and final
+        error [deg] (empty where its simulation failed)."""
+        preds = self.predictors()
+        fmt = lambda v: "" if not np.isfinite(v) else round(float(v), 4)  # noqa: E731
+        return [{"subject": str(self.subject[i]), "recording": str(self.recording[i]),
+                 "t_start [s]": round(float(self.t[i, 0]), 4), "t_end [s]": round(float(self.t[i, -1]), 4),
+                 "status": pj.status_message(int(self.status[i])),
+                 **{f"{k}_rmse [deg]": fmt(v["rmse_deg"][i]) for k, v in preds.items()},
+                 **{f"{k}_final [deg]": fmt(v["final_error_deg"][i]) for k, v in preds.items()}}
+                for i in range(len(self))]
+
+    def summary(self) -> list[dict]:
+        """One row per subject and one for all: reaches predicted, and per predictor the median
+        joint RMSE and median final-posture error [deg] over its successful simulations."""
+        preds = self.predictors()
+        groups = [(s, self.subject == s) for s in dict.fromkeys(self.subject.tolist())]
+        rows = []
+        for name, sel in groups + ([("all", np.ones(len(self), bool))] if len(groups) > 1 else []):
+            row = {"subject": name, "reaches": int(sel.sum())}
+            for k, v in preds.items():
+                ok = sel & np.isfinite(v["rmse_deg"])
+                row[f"{k}_n"] = int(ok.sum())
+                row[f"{k}_median_rmse [deg]"] = float(np.median(v["rmse_deg"][ok])) if ok.any() else math.nan
+                row[f"{k}_median_final [deg]"] = float(np.median(v["final_error_deg"][ok])) if ok.any() else math.nan
+            rows.append(row)
+        return rows
 
 
 def _errors(q_pred, q_obs, status):
@@ -115,5 +154,5 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
         baselines[b] = dict(q_pred=q, rmse_deg=r, final_error_deg=f, status=st)
     return MovementPrediction(subject=cat["subject"], recording=cat["recording"], t=cat["t"], q_obs=cat["q_obs"],
                               q_pred=cat["q_pred"], rmse_deg=rmse, final_error_deg=final, status=cat["status"],
-                              baselines=baselines, skipped=skipped, problems=problems)
+                              baselines=baselines, skipped=skipped, problems=problems, chain=chain)
 

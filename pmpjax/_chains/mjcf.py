@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import on_host, row_chunks
+from .._base.batching import row_chunks
 from .._base.compile import fast_compile_jit
 from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
 from .._base.pytree import pytree_dataclass, static_field
