@@ -43,7 +43,8 @@ def _is(v, const):
     return isinstance(v, float) and v == const
 
 
-def _mul(a, b):
+def mul_const(a, b):
+    """``a * b`` where either may be a Python float: structural zeros and ones drop out."""
     if _is(a, 0.0) or _is(b, 0.0):
         return 0.0
     if _is(a, 1.0):
@@ -53,7 +54,8 @@ def _mul(a, b):
     return a * b
 
 
-def _add(a, b):
+def add_const(a, b):
+    """``a + b`` where either may be a Python float: a structural zero drops out."""
     return b if _is(a, 0.0) else a if _is(b, 0.0) else a + b
 
 
@@ -64,5 +66,5 @@ def matmul_rows(A, B):
     for i in range(3):
         for j in range(3):
             for k in range(3):
-                out[i][j] = _add(out[i][j], _mul(A[i][k], B[k][j]))
+                out[i][j] = add_const(out[i][j], mul_const(A[i][k], B[k][j]))
     return out

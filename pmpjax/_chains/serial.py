@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._base.rotations import add_const, matmul_rows, mul_const
 from .._base.trig import sincos
 
 _SLIDE, _HINGE = 2, 3
@@ -30,42 +31,24 @@ def _c(v) -> float:
     return 0.0 if abs(v) < _TINY else (1.0 if abs(v - 1.0) < _TINY else v)
 
 
-def _is(v, k: float) -> bool:
-    return isinstance(v, float) and v == k
-
-
-def _mul(a, b):
-    if _is(a, 0.0) or _is(b, 0.0):
-        return 0.0
-    if _is(a, 1.0):
-        return b
-    if _is(b, 1.0):
-        return a
-    return a * b
-
-
 def _add(*terms):
     out = 0.0
     for t in terms:
-        out = t if _is(out, 0.0) else (out if _is(t, 0.0) else out + t)
+        out = add_const(out, t)
     return out
 
 
 def _sub(a, b):
-    return a if _is(b, 0.0) else _add(a, -b)
-
-
-def _matmul(A, B):
-    return [[_add(*(_mul(A[i][k], B[k][j]) for k in range(3))) for j in range(3)] for i in range(3)]
+    return _add(a, -b)
 
 
 def _matvec(A, v):
-    return [_add(*(_mul(A[i][k], v[k]) for k in range(3))) for i in range(3)]
+    return [_add(*(mul_const(A[i][k], v[k]) for k in range(3))) for i in range(3)]
 
 
 def _cross(a, b):
-    return [_sub(_mul(a[1], b[2]), _mul(a[2], b[1])), _sub(_mul(a[2], b[0]), _mul(a[0], b[2])),
-            _sub(_mul(a[0], b[1]), _mul(a[1], b[0]))]
+    return [_sub(mul_const(a[1], b[2]), mul_const(a[2], b[1])), _sub(mul_const(a[2], b[0]), mul_const(a[0], b[2])),
+            _sub(mul_const(a[0], b[1]), mul_const(a[1], b[0]))]
 
 
 def _quat_mat(u) -> list:
@@ -86,7 +69,7 @@ def _axis_angle(a, s, c):
             aa = _c(a[i] * a[j])
             diag = 1.0 if i == j else 0.0
             cos_coef = _c(diag - aa)
-            row.append(_add(_mul(cos_coef, c), _mul(_c(K[i][j]), s), aa))
+            row.append(_add(mul_const(cos_coef, c), mul_const(_c(K[i][j]), s), aa))
         out.append(row)
     return out
 
@@ -121,18 +104,18 @@ def site_fk_jac_soa(path: tuple, n: int, qc):
     cols: dict[int, tuple] = {}
     for body_pos, body_quat, joints in bodies:
         pos = [_add(pos[i], v) for i, v in enumerate(_matvec(R, [_c(v) for v in body_pos]))]
-        R = _matmul(R, _quat_mat(body_quat))
+        R = matmul_rows(R, _quat_mat(body_quat))
         for jtype, axis, jpos, adr, qpos0 in joints:
             jpos = [_c(v) for v in jpos]
             anchor = [_add(a, p) for a, p in zip(_matvec(R, jpos), pos)]
             world_axis = _matvec(R, [_c(v) for v in axis])
             angle = qc[adr] if qpos0 == 0.0 else qc[adr] - qpos0
             if jtype == _SLIDE:
-                pos = [_add(p, _mul(a, angle)) for p, a in zip(pos, world_axis)]
+                pos = [_add(p, mul_const(a, angle)) for p, a in zip(pos, world_axis)]
                 cols[adr] = (_SLIDE, world_axis, None)
             else:
                 s, c = sincos(angle)
-                R = _matmul(R, _axis_angle([_c(v) for v in axis], s, c))
+                R = matmul_rows(R, _axis_angle([_c(v) for v in axis], s, c))
                 pos = [_sub(a, r) for a, r in zip(anchor, _matvec(R, jpos))]
                 cols[adr] = (_HINGE, world_axis, anchor)
     x = [_add(p, r) for p, r in zip(pos, _matvec(R, [_c(v) for v in site_pos]))]

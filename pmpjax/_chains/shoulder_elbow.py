@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.pytree import pytree_dataclass, static_field
-from .._base.rotations import _add, _mul, matmul_rows, rotation_rows
+from .._base.rotations import add_const, matmul_rows, mul_const, rotation_rows
 from .._base.trig import sincos
 from .._base.validate import as_array, check_positive
 from .kinematics import Chain
@@ -24,10 +24,10 @@ from .kinematics import Chain
 def _cross(a, b):
     """``a × b`` of 3-lists whose entries may be the Python floats 0.0 / 1.0 (skipped)."""
     def sub(u, v):
-        return _add(u, _mul(-1.0, v)) if not isinstance(v, float) else _add(u, -v)
+        return add_const(u, mul_const(-1.0, v)) if not isinstance(v, float) else add_const(u, -v)
 
-    return [sub(_mul(a[1], b[2]), _mul(a[2], b[1])), sub(_mul(a[2], b[0]), _mul(a[0], b[2])),
-            sub(_mul(a[0], b[1]), _mul(a[1], b[0]))]
+    return [sub(mul_const(a[1], b[2]), mul_const(a[2], b[1])), sub(mul_const(a[2], b[0]), mul_const(a[0], b[2])),
+            sub(mul_const(a[0], b[1]), mul_const(a[1], b[0]))]
 
 
 @pytree_dataclass
