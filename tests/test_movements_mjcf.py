@@ -117,3 +117,23 @@ def test_the_three_formats_give_the_same_reaches(case):
         assert len(got) == len(ref) == 8, name
         np.testing.assert_allclose(got.q_obs, ref.q_obs, rtol=0, atol=1e-12, err_msg=name)
         np.testing.assert_array_equal(got.t, ref.t, err_msg=name)
+
+
+def test_command_refuses_bad_input_before_any_fit(case, tmp_path, capsys):
+    from pmpjax._app.cli import main
+
+    good = str(case["paths"][0])
+    bad_joints = tmp_path / "P1_renamed.csv"
+    bad_joints.write_text(case["paths"][1].read_text().replace("elbow_flexion", "elbow", 1))
+    cases = [
+        (["--chain", str(tmp_path / "none.xml"), "--site", "hand", good], "none.xml: no such file"),
+        (["--chain", str(ARM5), "--site", "finger", good], "'finger' is not a site"),
+        (["--chain", str(ARM5), "--site", "hand", good, "--holdout", good], "also given as a recording to fit"),
+        (["--chain", str(ARM5), "--site", "hand", good, "--subject-pattern", "(["], "not a regular expression"),
+        (["--chain", str(ARM5), "--site", "hand", good, "--subject-pattern", "^Q"], "does not match the file name"),
+        (["--chain", str(ARM5), "--site", "hand", str(bad_joints)], "elbow_flexion"),
+    ]
+    for args, message in cases:
+        assert main(["fit-movements", *args, "--out", str(tmp_path / "out")]) == 2, args
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, (args, err)
