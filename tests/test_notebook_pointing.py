@@ -28,9 +28,17 @@ def test_main_job_part_and_command(tmp_path):
     assert len(rows) == 2 * 16 and {r["subject"] for r in rows} == set(SUBJECTS)
     out = res["results"]
     assert out["donders_converged"] == [True, True] and all(out["time_constants_converged"])
-    # (τ0, τ are fitted with the Donders-fitted KJ, q_rest, which the 64-posture session pins down
-    # only partly; recovery of the generating τ0, τ is tested with known KJ in test_pointing.py.)
-    assert np.all(np.isfinite(out["tau0_fit_s"])) and np.all(np.array(out["tau_fit_s"]) > 0)
+    # τ0, τ against the generating values (0.3 T, 0.12 T of the generator's T per subject). They are
+    # fitted with the Donders-fitted KJ, q_rest, which the Donders session pins down only partly:
+    # τ0 within 20 % (measured −6 %, −16 %), τ within a factor 2 (measured −10 %, +70 %); recovery
+    # with known KJ to 5 % is in test_pointing.py.
+    tcs_part = {r["subject"]: r for r in csv.DictReader((tmp_path / "pointing_time_constants.csv").open())}
+    tau0_true = np.array([float(tcs_part[n]["tau0_true_s"]) for n in out["subjects"]])
+    tau_true = np.array([float(tcs_part[n]["tau_true_s"]) for n in out["subjects"]])
+    np.testing.assert_allclose(tau_true, 0.4 * tau0_true, rtol=1e-5)
+    assert np.all((tau0_true > 0.3 * 0.35) & (tau0_true < 0.3 * 0.55))  # T drawn in [0.35, 0.55] s
+    np.testing.assert_allclose(out["tau0_fit_s"], tau0_true, rtol=0.2)
+    assert np.all(np.abs(np.log(np.array(out["tau_fit_s"]) / tau_true)) < np.log(2.0)), out["tau_fit_s"]
     # The captured counts agree with the p-values in the table (p >= 0.05: not significantly different).
     table = {(r["subject"], r["movement"]): r for r in rows}
     for s, name in enumerate(out["subjects"]):
@@ -47,8 +55,10 @@ def test_main_job_part_and_command(tmp_path):
     assert code == 0
     cmd_rows = list(csv.DictReader((cmd_out / "pointing_statistics.csv").open()))
     np.testing.assert_allclose([float(r["A_net"]) for r in cmd_rows], [float(r["A_net"]) for r in rows], rtol=1e-5)
+    # the command's time constants, against the generating values as the part's
     tcs = list(csv.DictReader((cmd_out / "time_constants.csv").open()))
-    np.testing.assert_allclose([float(r["tau0_s"]) for r in tcs], out["tau0_fit_s"], rtol=1e-5)
+    np.testing.assert_allclose([float(r["tau0_s"]) for r in tcs], tau0_true, rtol=0.2)
+    assert np.all(np.abs(np.log(np.array([float(r["tau_s"]) for r in tcs]) / tau_true)) < np.log(2.0))
     bad = tmp_path / "bad.csv"
     lines = pointing.read_text().splitlines()
     k = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#") and "subject" not in ln)
