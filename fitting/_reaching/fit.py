@@ -55,6 +55,7 @@ from .model import (
     ROSENBROCK_STEPS,
     STIFFNESS_COND_MAX,
     TIME_CONSTANTS,
+    _bound_residual,
     _Config,
     _final_residual,
     _model_and_planner,
@@ -297,8 +298,8 @@ class ReachingFit:
     fitted model's movements at that step count and at twice as many [deg] (NaN without stage 2).
     Bounds: ``stiffness_cond`` (S,) cond(KJ) with its bound ``stiffness_cond_max``;
     ``bound_active`` (S, 4) bool: the bound on cond(KJ) and on each shoulder rest angle binds at
-    the optimum (within three softplus widths of it or beyond: the fit presses against it, the
-    data alone would go further).
+    the optimum (within three softplus widths of it or beyond, or its penalty moves the estimate
+    by more than 0.1 standard errors: the fit presses against it, the data alone would go further).
     """
 
     subjects: tuple[str, ...]
@@ -535,6 +536,8 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         q3 = pars["q_rest"][:3]
         wc, wq = 3 * BOUND_WIDTH[0], 3 * BOUND_WIDTH[1]
         active[a] = np.r_[log_over > -wc, (q3 - out["hi"][k] > -wq) | (out["lo"][k] - q3 > -wq)]
+        active[a] |= _bound_pull_se(x, out["residual"][k], out["cov"][k], cost, n, out["lo"][k], out["hi"][k],
+                                    cfg) > BOUND_PULL_SE
         status[a] = int(out["status"][k]) if np.isfinite(cost) else int(Status.NONFINITE)
     return ReachingFit(
         subjects=tuple(names), converged=status == 0, status=status, param_names=_param_names(cfg),
@@ -545,6 +548,32 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         integration_error_deg=integration, stiffness_cond=cond, stiffness_cond_max=cfg.cond_max,
         bound_active=active, **res,
     )
+
+
+#: A bound also counts as binding when its penalty moves the estimate by more than this many
+#: standard errors (``_bound_pull_se``).
+BOUND_PULL_SE = 0.1
+
+
+def _bound_pull_se(theta, residual, cov, cost, n_res, lo, hi, cfg) -> np.ndarray:
+    """(4,) how far each bound's penalty residual moves the optimum, in standard errors of the
+    data alone (the largest over the parameters): the Gauss–Newton step ``H⁻¹ J_bᵀ r_b`` that
+    dropping that penalty would take, with ``H`` the data's Gauss–Newton matrix (the fit's
+    ``JᵀJ = σ² cov⁻¹`` less the bounds' ``J_bᵀ J_b``). The softplus penalties act some widths
+    inside a bound too, and along a direction the data barely determine (a shoulder rest angle,
+    say) a small pull moves the estimate far: a bound 5° inside where the data put a rest angle
+    holds it 2° inside the bound, beyond the three widths."""
+    use = np.isfinite(np.diag(cov))  # stage 1 only: the postural parameters
+    if not np.isfinite(cost) or cost <= 0 or n_res <= use.sum():
+        return np.zeros(4)
+    Jb = np.asarray(jax.jacfwd(_bound_residual)(jnp.asarray(theta), {"lo": lo, "hi": hi}, cfg))[:, use]
+    rb = np.asarray(residual)[-4:]
+    sigma2 = 2.0 * cost / (n_res - use.sum())
+    H = sigma2 * np.linalg.pinv(cov[np.ix_(use, use)]) - Jb.T @ Jb
+    H_inv = np.linalg.pinv(H)
+    se = np.sqrt(np.maximum(sigma2 * np.diag(H_inv), 1e-300))
+    step = H_inv @ (Jb * rb[:, None]).T  # (parameters, bounds)
+    return np.max(np.abs(step) / se[:, None], axis=0)
 
 
 def _training_rmse_deg(residual, n_slots, n_fitted, stage):

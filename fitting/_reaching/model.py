@@ -68,7 +68,8 @@ REST_MARGIN_DEG = 20.0
 #: about 1 % (the data residual's gradient is O(10)), soft enough for Levenberg–Marquardt.
 BOUND_WEIGHT = 30.0
 #: Softplus widths of the bounds: log cond(KJ) (2 % of the condition number), rest angles [rad];
-#: a bound counts as binding (``bound_active``) within three widths of it or beyond.
+#: a bound counts as binding (``bound_active``) within three widths of it or beyond, or where its
+#: penalty moves the estimate by more than 0.1 standard errors (``fit._bound_pull_se``).
 BOUND_WIDTH = (0.02, 0.01)
 GAIN_CAP = 60.0  # 1/T_rec: cap of the time-base generator's task-velocity gain
 FINAL_WEIGHT = 1.0
