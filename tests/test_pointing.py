@@ -493,11 +493,22 @@ def test_predictions_and_captured_counts_equal_a_direct_scipy_computation(analys
     plt.close("all")
 
 
-def test_time_constants_recover_the_generating_values(analysis, experiment):
+def test_time_constants_recover_the_generating_values(analysis, experiment, monkeypatch):
+    from fitting._pointing import time_constants as tcm
+
     ex, _ = experiment
     tr = ex.truth
+    seen = []
+    clustered = tcm._clustered_se
+    monkeypatch.setattr(tcm, "_clustered_se", lambda jac, r, *a: seen.append((jac, r)) or clustered(jac, r, *a))
     tc = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"])
     assert tc.converged.all() and tc.tau0.shape == (2,) and tc.solver == "rk4"
+    # "Converged" stops at the optimum: the Gauss–Newton step from the stopping point (NumPy, on the
+    # fit's residual and Jacobian there) is below 0.1 of the standard error of every log time constant.
+    (jac, r), = seen
+    step = np.linalg.solve(np.einsum("bki,bkj->bij", jac, jac), -np.einsum("bki,bk->bi", jac, r))
+    in_se = np.abs(step) / (tc.stderr / np.c_[tc.tau0, tc.tau])
+    assert np.all(in_se < 0.1), in_se
     # Generated with τ0 = 0.3 T, τ = 0.12 T (one T per subject), not the paper's T/5.
     np.testing.assert_allclose(tc.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(tc.tau, tr["tau"][:, 0], rtol=0.05)
