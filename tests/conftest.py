@@ -62,9 +62,9 @@ def pytest_unconfigure(config):
 # main-job parts' files by their parts' compile times.
 SLOWEST_FIRST = (
     "test_pointing.py", "test_donders.py", "test_reaching.py", "test_jit_safety.py", "test_ik_weights.py",
-    "test_simulate.py", "test_movements.py", "test_movements_mjcf.py", "test_accuracy.py",
-    "test_notebook_fit_your_own_arm.py", "test_springy_rollout_gradient.py", "test_movements_planar.py",
-    "test_notebook_pointing.py", "test_main_job_parts.py",
+    "test_movements_mjcf.py", "test_simulate.py", "test_movements.py", "test_accuracy.py",
+    "test_springy_rollout_gradient.py", "test_movements_planar.py", "test_notebook_pointing.py",
+    "test_main_job_parts.py", "test_notebook_fit_your_own_arm.py",
     "test_commands.py", "test_notebook_donders.py", "test_springy_rollouts.py", "test_springy_reflexes.py",
     "test_primitives.py", "test_notebook_sweeps.py", "test_notebook_ik_weights.py", "test_primitives_fits.py",
     "test_notebook_lambda0_pmp.py", "test_equilibria.py", "test_cli.py", "test_ik_data.py",
