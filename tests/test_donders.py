@@ -328,7 +328,7 @@ def test_bad_csv(tmp_path, case):
 def test_bad_npz_and_paths(tmp_path, small_recording):
     p = tmp_path / "bad.npz"
     p.write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="not a readable"):
+    with pytest.raises(ValueError, match=r"bad\.npz: not an NPZ archive \(not a zip archive"):
         pj.read_recordings(p)
     np.savez(tmp_path / "miss.npz", quat=small_recording.quat)
     with pytest.raises(ValueError, match="missing array"):
