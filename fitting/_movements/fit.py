@@ -56,7 +56,8 @@ class MovementFit:
     (``time_constants="seconds"``) or fractions of each reach's duration (``"fractions"``; ``tau``
     NaN for the time-base generator, whose duration fraction is ``duration``); ``delay`` (S,)
     how long before each reach's window the target appeared (Arimoto; same unit); ``converged``,
-    ``status`` (S,) (``pmpjax.Status``; ``messages``); ``params``, ``stderr`` (S, p), ``cov``
+    ``status`` (S,) (``pmpjax.Status``; ``messages``; ``INACCURATE`` when the fit met its tolerance but
+    the integration error at the optimum stays above ``INTEGRATION_TOL_DEG``); ``params``, ``stderr`` (S, p), ``cov``
     (S, p, p) with ``param_names`` (zero variance along unidentified directions); ``unidentified``
     (S,) tuples of the parameter names that load on each unidentified direction at the optimum, and
     ``unidentified_directions`` (S, p, p) the unit directions as rows (zero rows for the others);
@@ -381,6 +382,8 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
             dur[a] = pr["a"]
         tau0[a] = pr["a0"]
         status[a] = int(out["status"][i])
+        if status[a] == int(Status.SUCCESSFUL) and out["integration_error_deg"][i] > INTEGRATION_TOL_DEG:
+            status[a] = int(Status.INACCURATE)  # (converged on a simulation that is not accurate enough)
         n_reach[a] = len(usable[s])
         per = (SAMPLES - 1 + 1) * n
         N = n_reach[a] * per
