@@ -3,14 +3,12 @@ recordings on its own arm model, held-out reaches predicted against the baseline
 
 from __future__ import annotations
 
-import json
-import math
 import re
 from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import output_dir
+from pmpjax.internal import output_dir, plural, write_json
 
 from .commands import _write_csv, _x64
 
@@ -61,20 +59,6 @@ def _subject(path: Path, pattern: re.Pattern) -> str:
     if m is None:
         raise ValueError(f"{path}: --subject-pattern {pattern.pattern!r} does not match the file name")
     return m.group(1) if m.groups() else m.group(0)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, float | np.floating):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.integer | np.bool_):
-        return obj.item()
-    return obj
 
 
 def read_recordings_for(chain, paths, pattern: re.Pattern) -> list:
@@ -134,7 +118,7 @@ def _fit_movements(args) -> int:
         fig.savefig(out / "movement_parameters.png", dpi=100)
         plt.close(fig)
     n_ok = int(np.sum(fit.converged))
-    line = f"{n_ok}/{len(fit.subjects)} subject{'s' if len(fit.subjects) != 1 else ''} converged"
+    line = f"{n_ok} of {plural(len(fit.subjects), 'subject')} converged"
     if held:
         pred = predict_movements(fit, held)
         _write_csv(out / "movement_predictions.csv", pred.movement_rows())
@@ -151,6 +135,6 @@ def _fit_movements(args) -> int:
         last = summary[-1]
         line += (f"; {len(pred)} held-out reaches, median joint RMSE {last['model_median_rmse [deg]']:.2f} deg "
                  f"(pseudo-inverse {last['pinv_minjerk_median_rmse [deg]']:.2f} deg)")
-    (out / "movement_fit.json").write_text(json.dumps(_jsonable(result), indent=1, allow_nan=False))
+    write_json(out / "movement_fit.json", result)
     print(f"{line}; wrote {out}")
     return 0 if n_ok == len(fit.subjects) else 1
