@@ -11,7 +11,15 @@ from .predict import MovementPrediction
 def plot_movements(pred: MovementPrediction, subject, *, predictors=("model", "pinv_minjerk"), max_reaches: int = 6):
     """Held-out reaches of one subject: each joint's recorded (black) and predicted path against
     time [s, the recording's clock], and the hand paths (fk of the joint paths) in two views.
-    Returns the matplotlib figure."""
+
+    **Arguments:** ``pred`` a :class:`MovementPrediction`; ``subject`` a subject in it;
+    ``predictors`` names from ``pred.predictors()`` to draw; ``max_reaches`` joint paths drawn (of
+    the subject's first recording).
+
+    **Returns:** the matplotlib figure.
+
+    **Raises:** ``TypeError`` for a non-prediction; ``ValueError`` for an unknown subject or predictor.
+    """
     import matplotlib.pyplot as plt
 
     if not isinstance(pred, MovementPrediction):
@@ -77,7 +85,11 @@ def plot_movements(pred: MovementPrediction, subject, *, predictors=("model", "p
 
 def plot_movement_parameters(fit: MovementFit):
     """The fitted parameters of every subject as a table (value ± standard error; unidentified
-    ones marked as a gauge). Returns the matplotlib figure."""
+    ones marked as a gauge).
+
+    **Arguments:** ``fit`` a :class:`MovementFit`. **Returns:** the matplotlib figure.
+    **Raises:** ``TypeError`` for a non-fit.
+    """
     import matplotlib.pyplot as plt
 
     if not isinstance(fit, MovementFit):
