@@ -31,7 +31,7 @@ from pmpjax.internal import (
     to_jax,
 )
 
-from ._optimise import least_squares
+from .._optimise import least_squares
 
 N_NEWTON = 12  # Newton steps per equilibrium inside the fits (quadratic convergence from θ_set)
 
