@@ -16,8 +16,7 @@ def _ik_hugmp(ctx) -> dict:
     (Khoramshahi et al. 2022 Algorithm 1, γ = 0.6, the elbow over-specified and fixed at 1)."""
     import pmpjax as pj
 
-    from .._ik.datasets import hugmp_ik_weights
-    from .._ik.plots import plot_ik_weights
+    from .._ik import hugmp_ik_weights, plot_ik_weights
 
     subjects = (1, 2) if ctx.quick else (1, 2, 3, 4)
     res = hugmp_ik_weights(subjects, n_boot=10 if ctx.quick else 100, key=None)
@@ -167,8 +166,7 @@ def _ik_figures(ctx) -> dict:
     import jax
     import matplotlib.pyplot as plt
 
-    from .._ik.examples import ik_fig1_data, ik_fig3_data
-    from .._ik.weights import estimate_ik_weights
+    from .._ik import estimate_ik_weights, ik_fig1_data, ik_fig3_data
 
     reps = 20 if ctx.quick else 100
     q, x, J = ik_fig1_data(jax.random.PRNGKey(ctx.seed), n_reps=reps + 3 * 10)
@@ -224,10 +222,14 @@ def _ik_synthetic(ctx) -> dict:
     4-DoF shoulder–elbow arm) with contribution coefficients and the paired Hotelling T² test."""
     import pmpjax as pj
 
-    from .._ik.analysis import contribution_coefficients, hotelling_t2, overspecified_joints
-    from .._ik.datasets import synthetic_ik_dataset
-    from .._ik.plots import plot_ik_weights
-    from .._ik.weights import estimate_ik_weights_lm
+    from .._ik import (
+        contribution_coefficients,
+        estimate_ik_weights_lm,
+        hotelling_t2,
+        overspecified_joints,
+        plot_ik_weights,
+        synthetic_ik_dataset,
+    )
 
     n_part = 6 if ctx.quick else 17
     data = synthetic_ik_dataset(ctx.seed, n_participants=n_part, n_trials=5 if ctx.quick else 20)

@@ -38,8 +38,7 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 from pmpjax.internal import fast_compile_jit
 
-from .._ik.analysis import overspecified_joints
-from .._ik.weights import estimate_ik_weights
+from .._ik import estimate_ik_weights, overspecified_joints
 from .._optimise import covariance, least_squares, lm_iterations
 from .model import (
     _N_K,
