@@ -174,12 +174,12 @@ def _analyze_pointing(args) -> int:
 
     from .._pointing import (
         analyze_pointing,
+        fit_pointing_models,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
     )
-    from .pointing import fit_pointing_models
 
     try:
         rec = pj.read_pointing(args.file, on_invalid="skip" if args.skip_invalid else "raise")

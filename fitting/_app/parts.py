@@ -290,12 +290,12 @@ def _pointing(ctx) -> dict:
 
     from .._pointing import (
         analyze_pointing,
+        fit_pointing_models,
         plot_pointing_curvature,
         plot_pointing_joints,
         plot_pointing_paths,
         plot_pointing_speed,
     )
-    from .pointing import fit_pointing_models
 
     # Generated with τ0 = 0.3 T, τ = 0.12 T: not the paper's T/5, so that the heuristic and the
     # fitted time constants can be told apart.

@@ -3,6 +3,8 @@ fitted time constants and the paper's figures."""
 
 from .analysis import PointingAnalysis as PointingAnalysis
 from .analysis import analyze_pointing as analyze_pointing
+from .pipeline import PointingModels as PointingModels
+from .pipeline import fit_pointing_models as fit_pointing_models
 from .plots import plot_pointing_curvature as plot_pointing_curvature
 from .plots import plot_pointing_joints as plot_pointing_joints
 from .plots import plot_pointing_paths as plot_pointing_paths
