@@ -28,6 +28,7 @@ from ._data.matlab import load_ik_dataset as load_ik_dataset
 from ._data.matlab import read_mat as read_mat
 from ._data.matlab import write_ik_dataset as write_ik_dataset
 from ._data.matlab import write_mat as write_mat
+from ._data.simulation_config import read_simulation_config as read_simulation_config
 from ._pmp.equilibria import Equilibrium as Equilibrium
 from ._pmp.equilibria import equilibrium_posture as equilibrium_posture
 from ._pmp.integrate import SOLVERS as SOLVERS
@@ -121,4 +122,3 @@ from ._wrist.subjects import paper_subjects as paper_subjects
 from ._wrist.subjects import subject_names as subject_names
 
 __version__ = "0.1.0"
-from ._app.simulate import read_simulation_config as read_simulation_config

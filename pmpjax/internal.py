@@ -2,26 +2,14 @@
 use beside the public API of ``pmpjax``. Like ``equinox.internal``: documented and tested, but not
 part of the stable API — names here may change between releases without deprecation.
 
-``fitting`` imports from ``pmpjax`` and from here only, never from a private module; a test
-(tests/test_public_api.py) keeps it so.
+``fitting``'s library imports from ``pmpjax`` and from here only, never from a private module;
+its application (``fitting._app``) imports pmpjax's application through that package's face,
+``pmpjax._app``. Nothing here belongs to the application (command line, main job); a test
+(tests/test_public_api.py) keeps both rules.
 """
 
 # jax.jit for compile-bound kernels (fits, equilibria, MJX rollouts; pmpjax/_base/compile.py)
 # Leading batch axes and padding (pmpjax/_base/batching.py)
-# The main job's part protocol (``pmpjax.jobs`` entry points)
-from ._app.parts import Part as Part
-from ._app.parts import PartContext as PartContext
-
-# Simulation configs (``pmpjax simulate CONFIG``; ``pmpjax sweep CONFIG`` builds on them)
-from ._app.simulate import ConfigError as ConfigError
-from ._app.simulate import build_simulation as build_simulation
-from ._app.simulate import example_help as example_help
-from ._app.simulate import read_config as read_config
-
-# Command-line text: help without docstring markup, counts with their nouns, option types
-from ._app.text import plain as plain
-from ._app.text import plural as plural
-from ._app.text import positive_int as positive_int
 from ._base.batching import bucket as bucket
 from ._base.batching import flatten_batch as flatten_batch
 from ._base.batching import on_host as on_host

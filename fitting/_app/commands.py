@@ -12,14 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import (
-    example_help,
-    output_dir,
-    plain,
-    plural,
-    positive_int,
-    write_json,
-)
+from pmpjax._app import example_help, plain, plural, positive_int
+from pmpjax.internal import output_dir, write_json
 
 from .._ik import read_ik_file
 

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import output_dir, plural, write_json
+from pmpjax._app import plural
+from pmpjax.internal import output_dir, write_json
 
 from .commands import _write_csv, _x64
 

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import Part, plural, write_json
+from pmpjax._app import Part, plural
+from pmpjax.internal import write_json
 
 
 def _ik_hugmp(ctx) -> dict:

@@ -45,17 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax.internal import (
-    ConfigError,
-    build_simulation,
-    check_rk4_stability,
-    example_help,
-    output_dir,
-    plain,
-    plural,
-    read_config,
-    write_json,
-)
+from pmpjax._app import ConfigError, build_simulation, example_help, plain, plural, read_config
+from pmpjax.internal import check_rk4_stability, output_dir, write_json
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")

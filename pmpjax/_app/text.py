@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from pathlib import Path
 
 _CODE = re.compile(r"``(.+?)``")
 
@@ -31,3 +32,9 @@ def positive_int(text: str) -> int:
     if n < 1:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
     return n
+
+
+def example_help(name: str) -> str:
+    """The ``--help`` line pointing to a shipped example file (``pmpjax/data/examples/name``)."""
+    path = Path(__file__).parents[1] / "data" / "examples" / name
+    return f"Example: {path} (copy it to start from your own: cp {path} .)"
