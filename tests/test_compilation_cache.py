@@ -19,7 +19,7 @@ SCRIPT = textwrap.dedent(
     import json, sys
     import jax
     jax.config.update("jax_enable_x64", True)
-    from pmpjax._app.reproduce import enable_compilation_cache  # the command line's own switch
+    from pmpjax._app.cache import enable_compilation_cache  # the command line's own switch
     enable_compilation_cache(sys.argv[1])
     import numpy as np
     import pmpjax as pj

@@ -12,8 +12,8 @@ import traceback
 from pathlib import Path
 
 from .._base.jsontext import json_safe
+from .cache import enable_compilation_cache
 from .parts import PartContext, as_part, portable, run_part
-from .reproduce import enable_compilation_cache
 
 _WORKER: dict = {}
 
