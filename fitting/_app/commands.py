@@ -7,7 +7,6 @@ with status 2 (see ``pmpjax._app.cli``).
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -16,20 +15,7 @@ from pmpjax._app import example_help, plain, plural, positive_int
 from pmpjax.internal import output_dir, write_json
 
 from .._ik import read_ik_file
-
-
-def _x64():
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-
+from .output import enable_x64, write_csv
 
 # ----------------------------------------------------------------------------- fit-donders
 
@@ -51,7 +37,7 @@ def add_fit_donders(sub) -> None:
 
 
 def _fit_donders(args) -> int:
-    _x64()
+    enable_x64()
     import pmpjax as pj
 
     from .._donders import fit_donders
@@ -72,7 +58,7 @@ def _fit_donders(args) -> int:
             "rms_torsion_deg": f"{np.rad2deg(float(fit.rms[i])):.4g}",
             "samples": int(np.asarray(rec.mask[i]).sum()),
         })
-    _write_csv(out / "donders_fit.csv", rows)
+    write_csv(out / "donders_fit.csv", rows)
     write_json(out / "donders_fit.json", {
         "file": str(args.file), "subjects": list(map(str, rec.subjects)), "KJ": fit.KJ, "q_rest": fit.q_rest,
         "converged": fit.converged, "report": [fit.report(i) for i in range(len(rec.subjects))]}, indent=2)
@@ -101,7 +87,7 @@ def add_ik_weights(sub) -> None:
 
 
 def _ik_weights(args) -> int:
-    _x64()
+    enable_x64()
     import pmpjax as pj
 
     from .._ik import contribution_coefficients, estimate_ik_weights, estimate_ik_weights_lm
@@ -123,7 +109,7 @@ def _ik_weights(args) -> int:
              **{f"w_{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
              **{f"beta_{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
              "error": f"{float(error[i]):.4g}"} for i, lab in enumerate(d["labels"])]
-    _write_csv(out / "ik_weights.csv", rows)
+    write_csv(out / "ik_weights.csv", rows)
     n_ok = int(np.asarray(res.converged).sum())
     print(f"{n_ok} of {plural(len(rows), 'item')} converged; wrote {out / 'ik_weights.csv'}")
     return 0 if n_ok == len(rows) else 1
@@ -158,7 +144,7 @@ def add_analyze_pointing(sub) -> None:
 
 
 def _analyze_pointing(args) -> int:
-    _x64()
+    enable_x64()
     import matplotlib
 
     matplotlib.use("Agg")
@@ -192,12 +178,12 @@ def _analyze_pointing(args) -> int:
     if don is not None:
         fit, order, heuristic, tc, pred = fit_pointing_models(an, don, n_starts=args.starts)
         text += "\n\nτ = τ0 = T/5:\n" + heuristic.table() + "\n\nfitted τ0, τ:\n" + pred.table()
-        _write_csv(out / "time_constants.csv", [
+        write_csv(out / "time_constants.csv", [
             {"subject": s, "donders_status": pj.status_message(int(fit.status[order[i]])),
              "tau0_s": f"{tc.tau0[i]:.6g}", "tau_s": f"{tc.tau[i]:.6g}", "status": pj.status_message(int(tc.status[i])),
              "captured_T5": int(heuristic.n_captured[i]), "captured_fitted": int(pred.n_captured[i])}
             for i, s in enumerate(an.subjects)])
-    _write_csv(out / "pointing_statistics.csv",
+    write_csv(out / "pointing_statistics.csv",
                an.statistics_rows(None if pred is None else {"T5": heuristic, "fitted": pred}))
     (out / "pointing_statistics.txt").write_text(text + "\n")
     (out / "excluded.txt").write_text("".join(f"{reason}\n" for *_, reason in an.excluded))

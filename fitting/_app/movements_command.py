@@ -11,7 +11,7 @@ import numpy as np
 from pmpjax._app import plural
 from pmpjax.internal import output_dir, write_json
 
-from .commands import _write_csv, _x64
+from .output import enable_x64, write_csv
 
 SUBJECT_PATTERN = r"^([^_]+)"
 
@@ -69,7 +69,7 @@ def read_recordings_for(chain, paths, pattern: re.Pattern) -> list:
 
 
 def _fit_movements(args) -> int:
-    _x64()
+    enable_x64()
     import matplotlib
 
     matplotlib.use("Agg")
@@ -94,8 +94,8 @@ def _fit_movements(args) -> int:
     train = read_recordings_for(chain, args.recordings, pattern)
     held = read_recordings_for(chain, args.holdout, pattern)
     fit = fit_movements(chain, train, model=args.model, damping=args.damping, time_constants=args.time_constants)
-    _write_csv(out / "movement_fit.csv", fit.summary())
-    _write_csv(out / "movement_parameters.csv", fit.parameter_rows())
+    write_csv(out / "movement_fit.csv", fit.summary())
+    write_csv(out / "movement_parameters.csv", fit.parameter_rows())
     reach_rows = []
     for s, found in fit.reaches.items():
         for k in range(len(found)):
@@ -106,7 +106,7 @@ def _fit_movements(args) -> int:
             reach_rows.append({"subject": s, "recording": rec, "t_start [s]": round(float(a), 4),
                                "t_end [s]": round(float(b), 4), "used": "skipped", "reason": why})
     if reach_rows:
-        _write_csv(out / "reaches.csv", reach_rows)
+        write_csv(out / "reaches.csv", reach_rows)
     result = {
         "chain": str(chain_path), "site": args.site, "joint_names": list(fit.joint_names),
         "recordings": [str(p) for p in args.recordings], "model": fit.model, "damping": fit.damping,
@@ -122,9 +122,9 @@ def _fit_movements(args) -> int:
     line = f"{n_ok} of {plural(len(fit.subjects), 'subject')} converged"
     if held:
         pred = predict_movements(fit, held)
-        _write_csv(out / "movement_predictions.csv", pred.movement_rows())
+        write_csv(out / "movement_predictions.csv", pred.movement_rows())
         summary = pred.summary()
-        _write_csv(out / "movement_prediction_summary.csv", summary)
+        write_csv(out / "movement_prediction_summary.csv", summary)
         result["held_out"] = {"recordings": [str(p) for p in args.holdout], "summary": summary,
                               "problems": pred.problems,
                               "skipped": {k: [list(v) for v in vs] for k, vs in pred.skipped.items()}}
