@@ -619,7 +619,7 @@ def adaptive_steps(model, planner, q0, target, **kw):
     """Steps tried per movement (B,) by ``simulate(..., dt=None)``: its kernel traced again with
     ``integrate_adaptive`` wrapped to report its step counts (a ``jax.debug.callback``), the
     library untouched."""
-    from pmpjax._pmp import simulate as S
+    from pmpjax.internal import simulate_module as S
 
     box = []
     orig_int, orig_run = S.integrate_adaptive, S._run_adaptive

@@ -94,7 +94,7 @@ from scipy.optimize import minimize  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
-from fitting._donders import fit_nio_batch, nio_starts  # noqa: E402
+from fitting.internal import fit_nio_batch, nio_starts  # noqa: E402
 
 N_POST = 500
 N_STARTS = 2
@@ -282,7 +282,7 @@ def floor(rec, fit):
     chunk (CHUNK subjects × N_STARTS starts), times the LM steps: ``ideal`` uses each start's own
     step count (no vmap lane waiting), ``chunked`` the chunk's slowest start (what a vmapped
     while_loop pays)."""
-    from fitting._donders import nio_residual
+    from fitting.internal import nio_residual
 
     resid = nio_residual(pj.Wrist(), 5, 4.0, "torsion", 1e-10)
     lin = jax.jit(jax.vmap(jax.vmap(jax.jacfwd(resid), in_axes=(0, None)), in_axes=(0, 0)))

@@ -84,8 +84,7 @@ import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from pmpjax._pmp.integrate import integrate  # noqa: E402
-from pmpjax._pmp.redundancy import admittance_terms_soa  # noqa: E402
+from pmpjax.internal import admittance_terms_soa, integrate  # noqa: E402
 
 
 class RK4(diffrax.AbstractERK):

@@ -45,8 +45,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _baselines import write_results  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from fitting._donders import nio_residual, nio_starts  # noqa: E402
-from fitting._optimise import least_squares  # noqa: E402
+from fitting import least_squares  # noqa: E402
+from fitting.internal import nio_residual, nio_starts  # noqa: E402
 
 N_POST, N_STARTS, MAX_STEPS = 500, 2, 100
 

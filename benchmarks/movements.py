@@ -174,9 +174,8 @@ import _baselines as bl  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
-from pmpjax._base.pytree import pytree_dataclass, static_field  # noqa: E402
-from pmpjax._base.trig import sincos  # noqa: E402
-from pmpjax._chains import mjcf as mjcf_kin  # noqa: E402
+from fitting.internal import movement_fit_module as F  # noqa: E402
+from pmpjax.internal import pytree_dataclass, sincos, site_jacobians, static_field  # noqa: E402
 
 _T_IMPORTED = time.perf_counter()
 
@@ -284,7 +283,6 @@ def recordings(data, subjects, trials) -> list:
 def instrument_stages() -> list:
     """Time fitting's private stage functions (wall, blocking on the result, and the compile
     spans inside) by wrapping them in this process; returns the list the calls are appended to."""
-    from fitting._movements import fit as F
 
     calls = []
     for name in ("_stage1", "_identifiability", "_stage2"):
@@ -343,7 +341,6 @@ def job_cold(path) -> dict:
 
 
 def job_scaling(path, S: int, calls: int, hold_steps: bool) -> dict:
-    from fitting._movements import fit as F
 
     if hold_steps:  # no doubling of the step count: every S does the same work per subject
         F.MAX_STEPS_PER_SAMPLE = F.STEPS_PER_SAMPLE
@@ -520,7 +517,7 @@ class MjxPathChain(pj.Chain):
 
     def fk_jac_soa(self, qc):
         batch = qc.shape[1:]
-        x, J = mjcf_kin.site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
+        x, J = site_jacobians(self.mjx_model, self.site_id, qc.reshape(self.n, -1).T)
         return x.T.reshape((3,) + batch), J.transpose(1, 2, 0).reshape((3, self.n) + batch)
 
 

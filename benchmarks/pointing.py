@@ -87,8 +87,7 @@ from _baselines import per_call_us, write_results  # noqa: E402
 
 import fitting  # noqa: E402
 import pmpjax as pj  # noqa: E402
-from fitting._pointing.observe import _silverman_weights  # noqa: E402
-from fitting._pointing.time_constants import FIT_DT, FIT_SPAN, _item_data  # noqa: E402
+from fitting.internal import FIT_DT, FIT_SPAN, silverman_weights, time_constant_item_data  # noqa: E402
 
 
 def load():
@@ -154,7 +153,7 @@ def _movement(KJ, q_rest, tau0, tau, q0, target, T, tol=None):
 
 
 def _silverman_np(bandwidth, h, J):
-    """``fitting._pointing.observe._silverman_weights`` of one bandwidth, in NumPy (2J + 1,)."""
+    """``fitting.internal.silverman_weights`` of one bandwidth, in NumPy (2J + 1,)."""
     u = np.abs(np.arange(-J, J + 1) * h) / bandwidth
     w = 0.5 * np.exp(-u / np.sqrt(2)) * np.sin(u / np.sqrt(2) + np.pi / 4)
     return w / w.sum()
@@ -239,7 +238,7 @@ def _movement_slow(KJ, q_rest, tau0, tau, q0, target, T, tol=None):
 
 
 def _silverman_jax(bandwidth, h, J):
-    return np.asarray(_silverman_weights(jnp.asarray([bandwidth]), h, J))[0]
+    return np.asarray(silverman_weights(jnp.asarray([bandwidth]), h, J))[0]
 
 
 SLOW = dict(movement=_movement_slow, weights=_silverman_jax)
@@ -365,7 +364,7 @@ def main():
     KJ, q_rest = fit.KJ, fit.q_rest
 
     an100, KJ100, q100 = tile(an, KJ, q_rest, max(args.sizes))
-    data, KJi, qri, Tbar, has, J = _item_data(an100, KJ100, q100, False)
+    data, KJi, qri, Tbar, has, J = time_constant_item_data(an100, KJ100, q100, False)
     opts = dict(threshold=an.threshold, n_samples=an.mean_path.shape[2], radius=an.radius, J=J)
     # the baseline against the slow reference, on the first subject at the start
     d0 = {k: v[0] for k, v in data.items()}

@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 from _baselines import write_results  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from pmpjax._springy_arm import arm as arm_mod  # noqa: E402
+from pmpjax.internal import PROBE_PARK, Scripted, rollout_batch  # noqa: E402
 
 STEPS = 1000  # 2 s at dt = 2 ms
 
@@ -68,13 +68,13 @@ def mjx_case(arm, q_set, repeats):
     Bd = jnp.broadcast_to(jnp.asarray(arm.B), (B, 6))
     q0 = q_set[:, 0]
     z = jnp.zeros((B, 6))
-    probe = jnp.broadcast_to(jnp.asarray(arm_mod.PROBE_PARK), (B, STEPS, 3))
+    probe = jnp.broadcast_to(jnp.asarray(PROBE_PARK), (B, STEPS, 3))
     force = jnp.zeros((B, STEPS, 3))
-    ctrl = arm_mod.Scripted()
+    ctrl = Scripted()
     c0 = jax.vmap(ctrl.init)(q0)
     args = (arm.mjx_model, arm.layout, ctrl, K, Bd, q0, z, q0, c0, (q_set, probe, force))
     t0 = time.perf_counter()
-    compiled = arm_mod._rollout_batch.lower(*args).compile()
+    compiled = rollout_batch.lower(*args).compile()
     compile_s = time.perf_counter() - t0
     dyn = args[:1] + args[2:]
     jax.block_until_ready(compiled(*dyn))

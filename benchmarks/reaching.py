@@ -112,11 +112,11 @@ import _baselines as bl  # noqa: E402
 from _baselines import per_call_us, write_results  # noqa: E402
 
 import fitting  # noqa: E402
-from fitting import _reaching as R  # noqa: E402
+from fitting import internal as R  # noqa: E402
 
 SUBJECTS = (1, 2, 3, 4)
 #: Every λ0-PMP variant of fitting.fit_reaching: planner × damping × time constants.
-VARIANTS = tuple((m, d, t) for m in R.MODELS for t in R.TIME_CONSTANTS for d in R.DAMPINGS)
+VARIANTS = tuple((m, d, t) for m in R.REACHING_MODELS for t in R.REACHING_TIME_CONSTANTS for d in R.REACHING_DAMPINGS)
 VARIANT_NAMES = {f"{m}/{d}/{t}": (m, d, t) for m, d, t in VARIANTS}
 
 
@@ -461,7 +461,7 @@ def table(args):
     def save():
         order = list(res["predictors"])
         res["predictors"] = {k: res["predictors"][k]
-                             for k in sorted(order, key=lambda k: (k in R.BASELINES, order.index(k)))}
+                             for k in sorted(order, key=lambda k: (k in R.REACHING_BASELINES, order.index(k)))}
         res["load_end"] = load()
         res["verdict"] = verdict(res)
         if base:
@@ -479,7 +479,7 @@ def table(args):
     res["fits"]["donders_only"] = fit_rows(don, wall, comp)
     res["predictors"]["donders_only"] = predictor_rows(pred, "model")
     rows["donders_only"] = _Rows(pred, "model")
-    for b in R.BASELINES:
+    for b in R.REACHING_BASELINES:
         res["predictors"][b] = predictor_rows(pred, b)
         rows[b] = _Rows(pred, b)
     save()
@@ -537,7 +537,7 @@ def fit_cost(args):
                       compile_method="union of jax.monitoring trace/lower/compile time spans inside the call")
 
     k = int(np.argmin(fit.n_motions))  # the subject with the fewest motions
-    m = R._motions(fit.subjects[k], None, fit.reps, fit.tasks)
+    m = R.reaching_motions(fit.subjects[k], None, fit.reps, fit.tasks)
     p = len(fit.param_names)
     elbow = m.q_obs[:, -1, 3].mean()
     theta_star = np.asarray(fit.params[k], float)
@@ -592,8 +592,8 @@ def fit_cost(args):
     extrap_cpu = cpu_per_eval * (p + 1) * max(it, 1)
     extrap_slow = per_slow * (p + 1) * max(it, 1)
     # the same computation: NumPy's cost at the JAX optimum against the JAX fit's data cost
-    per = (R.SAMPLES - 1) * 4 + 4
-    pred_rows = R._fit_motions([m], R._Config(fit.model, fit.damping, fit.time_constants, 5,
+    per = (R.REACHING_SAMPLES - 1) * 4 + 4
+    pred_rows = R.fit_reaching_motions([m], R.ReachingConfig(fit.model, fit.damping, fit.time_constants, 5,
                                               cond_max=fit.stiffness_cond_max),
                                theta0=fit.params[k][None], max_steps=(1, 0), steps=fit.steps_per_sample,
                                solver=fit.solver)["residual"][0][: len(m) * per]

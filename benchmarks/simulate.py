@@ -276,7 +276,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import pmpjax as pj  # noqa: E402
-from pmpjax._pmp import simulate as _simulate  # noqa: E402
+from pmpjax.internal import simulate_module as _simulate  # noqa: E402
 
 SAVES = {"final": pj.SaveAt(final=True), "every10": pj.SaveAt(every=10)}
 

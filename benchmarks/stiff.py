@@ -98,7 +98,7 @@ import jax.numpy as jnp  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
-from pmpjax._pmp.redundancy import admittance_terms_soa  # noqa: E402
+from pmpjax.internal import admittance_terms_soa  # noqa: E402
 
 SAMPLES = 50
 TS = tuple(np.linspace(0.0, 1.0, SAMPLES))

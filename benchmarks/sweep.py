@@ -86,7 +86,7 @@ def _params(rows: int):
 def _kernel():
     import functools
 
-    from fitting._sweep import curvature_row
+    from fitting.internal import curvature_row
 
     return functools.partial(curvature_row, dt=DT)
 
@@ -134,10 +134,10 @@ def child(cfg: dict) -> dict:
     if cfg.get("memory_only"):
         return res
     # the bare kernel on the same chunks: the sweep's own compiled kernel (no store, no bookkeeping)
-    from fitting._sweep.engines import _LocalEngine
+    from fitting.internal import LocalEngine
 
-    kernel_key = next(reversed(_LocalEngine._kernels))[0]  # the sweep's compiled kernel and its placement
-    engine = _LocalEngine(fn, jax.local_devices(), CHUNK, kernel_key)
+    kernel_key = next(reversed(LocalEngine._kernels))[0]  # the sweep's compiled kernel and its placement
+    engine = LocalEngine(fn, jax.local_devices(), CHUNK, kernel_key)
     n_chunks = -(-rows // CHUNK)
     chunks = []
     for k in range(n_chunks):
@@ -225,7 +225,7 @@ def store_formats():
         return []
     from pathlib import Path
 
-    from fitting._sweep.store import _atomic_write
+    from fitting.internal import atomic_write
 
     ch = 10_000
     rows_out = []
@@ -245,7 +245,7 @@ def store_formats():
                 for k, o in enumerate(outs):
                     b = io.BytesIO()
                     np.savez(b, **o)
-                    _atomic_write(d / f"{k:06d}-{digest(b.getvalue())}.npz", b.getvalue())
+                    atomic_write(d / f"{k:06d}-{digest(b.getvalue())}.npz", b.getvalue())
             elif fmt == "parquet":
                 for k, o in enumerate(outs):
                     t = pa.table({c: pa.FixedSizeListArray.from_arrays(pa.array(a.reshape(-1)), 8)
@@ -253,7 +253,7 @@ def store_formats():
                     b = pa.BufferOutputStream()
                     pq.write_table(t, b, compression="none")
                     data = b.getvalue().to_pybytes()
-                    _atomic_write(d / f"{k:06d}-{digest(data)}.parquet", data)
+                    atomic_write(d / f"{k:06d}-{digest(data)}.parquet", data)
             else:
                 g = zarr.open_group(str(d), mode="w")
                 for c, dt in (("A_net", "f8"), ("A_sum", "f8"), ("status", "i4")):

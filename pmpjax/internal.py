@@ -37,13 +37,19 @@ from ._base.profiles import minimum_jerk as minimum_jerk
 # Pytrees
 from ._base.pytree import pytree_dataclass as pytree_dataclass
 from ._base.pytree import replace as replace
+from ._base.pytree import static_field as static_field
+
+# sin and cos of one angle array in one pass (the chains' kinematics)
+from ._base.trig import sincos as sincos
 
 # Input validation: clear errors naming the argument, raised before tracing
 from ._base.validate import as_array as as_array
 from ._base.validate import check_finite_masked as check_finite_masked
+from ._base.validate import check_joint_angles as check_joint_angles
 from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int
 from ._base.validate import check_prng_key as check_prng_key
+from ._base.validate import check_seconds as check_seconds
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import input_file as input_file
@@ -54,13 +60,21 @@ from ._base.validate import read_text_file as read_text_file
 from ._base.validate import to_jax as to_jax
 from ._base.validate import warn_without_x64 as warn_without_x64
 
+# MJCF site kinematics on MJX (position and Jacobian of a site, batched over postures)
+from ._chains.mjcf import site_jacobians as site_jacobians
+
 # Data
 from ._data.hugmp import hugmp_directory as hugmp_directory
+
+# simulate's module, whose kernels benchmarks wrap within their own process (its compiled kernel
+# captured to time it alone, its adaptive integrator wrapped to count steps)
+from ._pmp import simulate as simulate_module  # noqa: F401
 
 # λ0-PMP kernels: one equilibrium (no checks, vmappable), the RK4 integrator, the one weighted
 # pseudo-inverse in its diagonal-weight SoA forms
 from ._pmp.equilibria import equilibrium_one as equilibrium_one
 from ._pmp.integrate import integrate as integrate
+from ._pmp.redundancy import admittance_terms_soa as admittance_terms_soa
 from ._pmp.redundancy import pinv_apply_diag_soa as pinv_apply_diag_soa
 from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
 
@@ -68,7 +82,11 @@ from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
 from ._pmp.simulate import check_rk4_stability as check_rk4_stability
 from ._pmp.simulate import forward_jacobians as forward_jacobians
 
-# Springy arm: argument checks and the per-item gravity equilibrium
+# Springy arm: argument checks, the per-item gravity equilibrium, and the batched MJX rollout
+# behind ``rollout(..., backend="mjx")`` with its scripted controller and parked probe
+from ._springy_arm.arm import PROBE_PARK as PROBE_PARK
+from ._springy_arm.arm import Scripted as Scripted
+from ._springy_arm.arm import _rollout_batch as rollout_batch  # noqa: F401
 from ._springy_arm.arm import check_arm as check_arm
 from ._springy_arm.primitives import arm_equilibrium_one as arm_equilibrium_one
 from ._springy_arm.primitives import check_set_point as check_set_point

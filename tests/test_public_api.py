@@ -214,6 +214,17 @@ def test_families_import_each_other_only_through_their_faces():
     assert not found, f"imports of another family's private module: {found}"
 
 
+def test_benchmarks_use_public_and_internal_names_only():
+    """Benchmarks import ``pmpjax``, ``fitting`` and their ``internal`` surfaces, never a private
+    module (what they need beside the public API is named in ``pmpjax.internal`` /
+    ``fitting.internal``)."""
+    modules = _modules("pmpjax") | _modules("fitting")
+    allowed = {"pmpjax", "pmpjax.internal", "fitting", "fitting.internal"}
+    found = [f"{m}:{n} {t}" for m, n, t in _imports("benchmarks") if t.split(".")[0] in ("pmpjax", "fitting")
+             and _owner(t, modules) not in allowed]
+    assert not found, f"benchmarks import private modules: {found}"
+
+
 def test_no_import_circles():
     """No two modules of a package import each other, directly or around a circle (imports inside
     functions count: a circle that only the order of calls keeps from failing is still one)."""
