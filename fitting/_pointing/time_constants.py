@@ -34,7 +34,6 @@ per subject × movement Gauss–Newton.
 from __future__ import annotations
 
 import dataclasses
-import os
 from functools import partial
 
 import jax
@@ -49,8 +48,6 @@ from .._optimise import covariance, least_squares, params_from_stiffness, stiffn
 from .analysis import PointingAnalysis
 from .observe import _kernel_halfwidth, _profiles, spline_bandwidth
 from .prediction import _check_params, _movement_inputs
-
-STOL = float(os.environ.get("TC_STOL", "1e-4"))
 
 #: Static simulation grid of the fits, in units of the movement's duration T_sj (the predictions'
 #: default): long enough for movements up to ~2 T_sj, steps ≤ τ/10 for τ ≥ 0.1 T_sj.

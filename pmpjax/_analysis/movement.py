@@ -160,10 +160,3 @@ def segment_by_speed(speed, *, threshold: float = 0.2):
     start = int(below_before[-1]) if below_before.size else None
     end = int(peak + 1 + below_after[0]) if below_after.size else None
     return start, end
-
-
-def normalised_samples(t0: float, t1: float, n: int) -> np.ndarray:
-    """``n`` equally spaced times from ``t0`` to ``t1`` inclusive (normalised time 0..1)."""
-    if not t1 > t0:
-        raise ValueError(f"the segment must have positive duration; got t0={t0}, t1={t1}")
-    return np.linspace(t0, t1, n)

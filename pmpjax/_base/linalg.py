@@ -27,12 +27,6 @@ def mv(A, v):
     return jnp.stack([sum(ai[j] * v[j] for j in range(len(v))) for ai in a])
 
 
-def mtv(A, v):
-    """``A.T @ v`` for ``A`` (k, r, ...) and ``v`` (k, ...) -> (r, ...)."""
-    a, v = elements(A), [v[j] for j in range(v.shape[0])]
-    return jnp.stack([sum(a[j][i] * v[j] for j in range(len(v))) for i in range(len(a[0]))])
-
-
 def mm(A, B):
     """``A @ B`` for ``A`` (r, k, ...) and ``B`` (k, c, ...) -> (r, c, ...)."""
     a, b = elements(A), elements(B)

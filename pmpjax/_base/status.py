@@ -52,9 +52,3 @@ def status_message(code) -> str | list:
     if arr.ndim == 0:
         return Status(int(arr)).message
     return [status_message(c) for c in arr]
-
-
-def status_counts(status) -> dict[str, int]:
-    """``{name: count}`` over an array of codes (names of codes that occur only)."""
-    vals, counts = np.unique(np.asarray(status).reshape(-1), return_counts=True)
-    return {Status(int(v)).name: int(c) for v, c in zip(vals, counts)}
