@@ -121,4 +121,14 @@ from ._wrist.subjects import load_subject as load_subject
 from ._wrist.subjects import paper_subjects as paper_subjects
 from ._wrist.subjects import subject_names as subject_names
 
-__version__ = "0.1.0"
+
+def _installed_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pmpjax")
+    except PackageNotFoundError:  # (a source tree that is not installed)
+        return "0+unknown"
+
+
+__version__ = _installed_version()

@@ -252,3 +252,11 @@ def test_the_layering_checks_find_what_they_forbid(tmp_path):
     assert _app_imports("fitting", tmp_path) == ["fitting._b.y:2 fitting._app.cli"]
     assert _private_family_imports("fitting", tmp_path) == [
         "fitting._a.x:2 fitting._b.y", "fitting._b.y:1 fitting._a.x", "fitting._b.y:2 fitting._app.cli"]
+
+
+def test_version_is_the_projects():
+    """``pmpjax.__version__`` comes from the installed distribution's metadata, so it is the version
+    pyproject.toml declares (a number written into the package would drift from it)."""
+    import tomllib
+
+    assert pj.__version__ == tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]

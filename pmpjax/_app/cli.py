@@ -66,12 +66,9 @@ def _commands() -> dict:
 
 
 def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    import pmpjax
 
-    try:
-        return version("pmpjax")
-    except PackageNotFoundError:  # (run from a source tree that is not installed)
-        return "unknown version"
+    return pmpjax.__version__
 
 
 def build_parser() -> argparse.ArgumentParser:
