@@ -149,7 +149,7 @@ def jax_rate(q, x, J, gamma, iters, devices, B=None, repeats=3):
     """(compile + first run [s], best time [s], weights) of one estimate_ik_weights call on B items."""
     B = len(q) if B is None else B
     run = lambda: fitting.estimate_ik_weights(  # noqa: E731
-        q[:B], x[:B], J[:B], gamma=gamma, tol=0.0, step_tol=0.0, max_iter=iters, devices=devices).w
+        q[:B], x[:B], J[:B], gamma=gamma, tol=0.0, step_tol=0.0, max_steps=iters, devices=devices).w
     t = time.perf_counter()
     w = np.asarray(run())
     first = time.perf_counter() - t
@@ -217,12 +217,12 @@ def main(quick=False):
           + ", ".join(f"B={b}: {v:.3g}" for b, v in scaling.items()), flush=True)
 
     t = time.perf_counter()
-    real = fitting.hugmp_ik_weights(n_boot=2, samples=100, max_iter=200)
+    real = fitting.hugmp_ik_weights(n_boot=2, samples=100, max_steps=200)
     t_real_point = time.perf_counter() - t
     save(real_data_point_estimate_s=t_real_point, real_data_w_S01=np.asarray(real["w"][0]).tolist(),
          real_data_converged_fraction=float(np.mean(real["converged"])))
     t = time.perf_counter()
-    real_b = fitting.hugmp_ik_weights(n_boot=20, samples=25, max_iter=200)
+    real_b = fitting.hugmp_ik_weights(n_boot=20, samples=25, max_steps=200)
     t_real_boot = time.perf_counter() - t
     save(real_data_bootstrap20_s=t_real_boot,
          real_data_ci_halfwidth_median=float(np.nanmedian(real_b["hi"] - real_b["lo"])),

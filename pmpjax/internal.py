@@ -20,6 +20,9 @@ from ._base.compile import FAST_COMPILE as FAST_COMPILE
 from ._base.compile import TopLevelOptionsJit as TopLevelOptionsJit
 from ._base.compile import fast_compile_jit as fast_compile_jit
 
+# Keywords renamed before 1.0 (the old name warns for one release)
+from ._base.deprecation import renamed_keywords as renamed_keywords
+
 # Strict JSON files (NaN and inf as null; arrays as lists)
 from ._base.jsontext import json_safe as json_safe
 from ._base.jsontext import json_text as json_text

@@ -140,7 +140,7 @@ def test_vmap_of_grad_equals_grad_of_sum(wrist):
 
 
 def test_not_converged_is_flagged(wrist):
-    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_iter=1)
+    eq = pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[2], max_steps=1)
     assert not bool(eq.converged) and int(eq.status) == pj.Status.MAX_STEPS and int(eq.steps) == 1
 
 
@@ -205,7 +205,7 @@ def test_eager_batch_sizes_share_the_kernel(wrist):
         (dict(q_init=np.zeros(2)), "q_init.*shape"),
         (dict(q_rest=np.zeros((2, 3)), target=np.zeros((3, 2))), "broadcast"),
         (dict(tol=0.0), "tol"),
-        (dict(max_iter=0), "max_iter"),
+        (dict(max_steps=0), "max_steps"),
     ],
 )
 @pytest.mark.bad_input("pj.equilibrium_posture")
@@ -215,6 +215,11 @@ def test_bad_input(wrist, kwargs, match):
     with pytest.raises(ValueError, match=match):
         pj.equilibrium_posture(wrist, **args)
 
+
+
+def test_max_iter_is_the_old_name_of_max_steps(wrist):
+    with pytest.warns(DeprecationWarning, match="max_iter"), pytest.raises(ValueError, match="max_steps"):
+        pj.equilibrium_posture(wrist, KJ1, QR1, TARGETS[0], max_iter=0)
 
 def test_non_chain_rejected():
     with pytest.raises(TypeError, match="chain"):

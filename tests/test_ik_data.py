@@ -461,7 +461,7 @@ def test_hugmp_weights_with_intervals(monkeypatch):
     seen = []
     boot = analysis.bootstrap_ik_weights
     monkeypatch.setattr(analysis, "bootstrap_ik_weights", lambda *a, **kw: seen.append(boot(*a, **kw)) or seen[-1])
-    res = fitting.hugmp_ik_weights(subjects=(1, 2, 3, 4, 9), samples=10, n_boot=6, max_iter=40,
+    res = fitting.hugmp_ik_weights(subjects=(1, 2, 3, 4, 9), samples=10, n_boot=6, max_steps=40,
                                    step_tol=1e-4, level=0.8)
     assert res["subjects"] == ["S01", "S02", "S03", "S04"] and "9" in res["failed"]
     assert list(res["fixed"]) == [False, False, False, True]  # the elbow is over-specified
@@ -513,7 +513,7 @@ def test_bootstrap_intervals_are_calibrated_against_monte_carlo():
     R, T, S = 32, 20, 10
     qd, xd, J = ik_fig1_numpy(np.random.default_rng(1), n_reps=R, K=T * S)
     split = lambda a: a.reshape(R, T, S, *a.shape[2:])  # noqa: E731
-    res = fitting.bootstrap_ik_weights(split(qd), split(xd), split(J), n_boot=32, gamma=0.6, max_iter=400,
+    res = fitting.bootstrap_ik_weights(split(qd), split(xd), split(J), n_boot=32, gamma=0.6, max_steps=400,
                                        key=jax.random.PRNGKey(3))
     w, lo, hi, smp = (np.asarray(a) for a in (res.w, res.lo, res.hi, res.samples))
     assert np.all(np.isfinite(w)) and np.mean(np.asarray(res.converged)) > 0.8
@@ -568,7 +568,7 @@ def test_prosthetic_conditions_and_eq25():
     ends = np.asarray(chain.fk(q.reshape(4, 4, -1, 3)[:, :, -1]))
     assert np.all(np.linalg.norm(ends - sim["goals"][None], axis=-1)[[nat, lock, assist]] < 5e-3)
     assert np.all(np.isfinite(q))
-    res = fitting.estimate_ik_weights(qd, xd, J, gamma=0.6, max_iter=400)
+    res = fitting.estimate_ik_weights(qd, xd, J, gamma=0.6, max_steps=400)
     w = np.asarray(res.w)
     # no null-space motion in Natural: the user's weights are the fixed point, and the run
     # converges to them (default tol: 10⁻³ relative)

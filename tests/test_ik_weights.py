@@ -33,7 +33,7 @@ def fig1():
 
 @pytest.fixture(scope="module")
 def fig1_result(fig1):
-    return fitting.estimate_ik_weights(*fig1, gamma=0.6, max_iter=150)
+    return fitting.estimate_ik_weights(*fig1, gamma=0.6, max_steps=150)
 
 
 def _batch4(*arrays):
@@ -67,7 +67,7 @@ def test_algorithm1_equals_reference_on_random_data():
     gam = np.array([0.0, 0.5, 0.9])
     for rate, fixed, w_min in ((None, (), 0.3), (0.3, (2,), 0.05)):
         res = fitting.estimate_ik_weights(q, x, J, gamma=gam, gamma_rate=rate, fixed=fixed or None, w_min=w_min,
-                                          tol=0.0, step_tol=0.0, max_iter=12)
+                                          tol=0.0, step_tol=0.0, max_steps=12)
         assert np.all(res.iterations == 12) and np.all(res.status == S.MAX_STEPS)
         raws = []
         for b in range(B):
@@ -133,7 +133,7 @@ def test_fig3_gamma_sweep_against_reference_and_paper():
     w* = (1, 0.01), closer the higher γ; iterates == the reference for γ = 0 and 0.6."""
     q, x, J = ik_fig3_numpy(k_null=0.3, k_task=2.0)
     gam = np.array([0.0, 0.6, 0.8, 0.9])
-    res = fitting.estimate_ik_weights(*_batch4(q, x, J), gamma=gam, tol=0.0, step_tol=1e-9, max_iter=3000)
+    res = fitting.estimate_ik_weights(*_batch4(q, x, J), gamma=gam, tol=0.0, step_tol=1e-9, max_steps=3000)
     w = np.asarray(res.w)
     assert np.all(res.status == S.STALLED)
     assert w[0, 1] == 1.0 and w[0, 0] < 0.05
@@ -153,22 +153,22 @@ def test_status_is_honest_about_how_a_run_ended():
     γ ← γ + 0.6 (1 − γ) stops the updates after 8 with w2 ≈ 0.47: SCHEDULE_END, not converged, also
     on data without null-space motion (w2 ≈ 0.61 there). Data without null-space motion at a
     constant γ = 0.6: the fixed point is the truth, SUCCESSFUL with w2 within 10⁻³ relative of
-    0.01. Overflowing data: NONFINITE; no stopping rule within max_iter: MAX_STEPS."""
+    0.01. Overflowing data: NONFINITE; no stopping rule within max_steps: MAX_STEPS."""
     a, b = ik_fig3_numpy(), ik_fig3_numpy(k_null=0.0)
     q = np.stack([a[0], b[0], 1e160 * a[0], a[0]])
     x = np.stack([a[1], b[1], 1e160 * a[1], a[1]])
     J = np.broadcast_to(a[2], (4,) + a[2].shape)
-    res = fitting.estimate_ik_weights(q, x, J, gamma=np.array([0.9, 0.6, 0.6, 0.9]), max_iter=3000)
+    res = fitting.estimate_ik_weights(q, x, J, gamma=np.array([0.9, 0.6, 0.6, 0.9]), max_steps=3000)
     assert list(np.asarray(res.status)) == [S.STALLED, S.SUCCESSFUL, S.NONFINITE, S.STALLED]
     assert list(np.asarray(res.converged)) == [False, True, False, False]
     assert abs(float(res.w[0, 1]) - 0.058) < 0.001 and abs(float(res.w[1, 1]) / 0.01 - 1) < 1e-3
     assert float(res.ls_gap[0]) > 0.5 and float(res.ls_gap[1]) < 1e-3
-    sch = fitting.estimate_ik_weights(q, x, J, gamma=0.6, gamma_rate=0.6, max_iter=3000)
+    sch = fitting.estimate_ik_weights(q, x, J, gamma=0.6, gamma_rate=0.6, max_steps=3000)
     assert list(np.asarray(sch.status)) == [S.SCHEDULE_END, S.SCHEDULE_END, S.NONFINITE, S.SCHEDULE_END]
     assert int(sch.iterations[0]) == 8 and abs(float(sch.w[0, 1]) - 0.469) < 0.001
     assert abs(float(sch.w[1, 1]) - 0.61) < 0.01
     assert np.isclose(float(sch.gamma[0]), 1 - 0.4 * 0.4**8)
-    short = fitting.estimate_ik_weights(q, x, J, gamma=0.9, tol=0.0, step_tol=0.0, max_iter=3000)
+    short = fitting.estimate_ik_weights(q, x, J, gamma=0.9, tol=0.0, step_tol=0.0, max_steps=3000)
     assert int(short.status[0]) == S.MAX_STEPS and int(short.iterations[0]) == 3000
 
 
@@ -248,7 +248,7 @@ def test_fixed_points_far_from_the_least_squares_weights_are_not_successful():
     q, x = np.stack([a[0], b[0]]), np.stack([a[1], b[1]])
     J = np.broadcast_to(a[2], (2,) + a[2].shape)
     gam = np.array([0.9, 0.0])
-    res = fitting.estimate_ik_weights(q, x, J, gamma=gam, max_iter=3000)
+    res = fitting.estimate_ik_weights(q, x, J, gamma=gam, max_steps=3000)
     w = np.asarray(res.w)
     assert list(np.asarray(res.status)) == [S.STALLED, S.STALLED]
     assert abs(w[0, 1] - 0.058) < 0.001 and w[1, 0] < 0.05
@@ -297,18 +297,18 @@ def test_unidentifiable_and_inconsistent_items_are_not_successful():
     q, x, J = (a[:2].copy() for a in ik_fig1_numpy(np.random.default_rng(3), n_reps=2))
     J[1, :, :, 4] = 0.0
     q[1] = np.einsum("kij,kj->ki", weighted_pinv(J[1, :, :, :4], W_STAR[:4]), x[1]) @ np.eye(4, 5)
-    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_iter=3000)
+    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=3000)
     assert list(np.asarray(res.status)) == [S.SUCCESSFUL, S.TOO_FEW_DATA]
     assert np.isinf(float(res.ls_gap[1]))
     lm = fitting.estimate_ik_weights_lm(q, x, J, gamma=0.6)
     assert list(np.asarray(lm.status)) == [S.SUCCESSFUL, S.TOO_FEW_DATA]
-    one = fitting.estimate_ik_weights(q[0, :1], x[0, :1], J[0, :1], gamma=0.6, max_iter=3000)
+    one = fitting.estimate_ik_weights(q[0, :1], x[0, :1], J[0, :1], gamma=0.6, max_steps=3000)
     assert int(one.status) == S.TOO_FEW_DATA
     assert int(fitting.estimate_ik_weights_lm(q[0, :1], x[0, :1], J[0, :1], gamma=0.6).status) == S.TOO_FEW_DATA
     rng = np.random.default_rng(5)
     qr = rng.standard_normal((3, 40, 4)) * rng.uniform(0.2, 3.0, 4)
     xr, Jr = rng.standard_normal((3, 40, 2)), rng.standard_normal((3, 40, 2, 4))
-    bad = fitting.estimate_ik_weights(qr, xr, Jr, gamma=np.array([0.0, 0.5, 0.9]), max_iter=1000)
+    bad = fitting.estimate_ik_weights(qr, xr, Jr, gamma=np.array([0.0, 0.5, 0.9]), max_steps=1000)
     assert not np.any(bad.converged)
 
 
@@ -319,7 +319,7 @@ def test_unidentifiable_and_inconsistent_items_are_not_successful():
 def test_batched_equals_per_subject(fig1, fig1_result):
     q, x, J = fig1
     for i in (0, 37):
-        one = fitting.estimate_ik_weights(q[i], x[i], J[i], gamma=0.6, max_iter=150)
+        one = fitting.estimate_ik_weights(q[i], x[i], J[i], gamma=0.6, max_steps=150)
         assert np.allclose(one.w, fig1_result.w[i], atol=1e-12, rtol=0)
         assert int(one.iterations) == int(fig1_result.iterations[i]) and int(one.status) == int(fig1_result.status[i])
 
@@ -328,7 +328,7 @@ def test_inside_a_callers_jit_equals_eager(fig1, fig1_result):
     """Traced inputs take the strict-summation kernel (compiler options apply to top-level calls
     only); same weights as the eager (reassociated-sum) call to rounding."""
     q, x, J = fig1
-    f = jax.jit(lambda q, x, J: fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_iter=150))
+    f = jax.jit(lambda q, x, J: fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150))
     res = f(q[:4], x[:4], J[:4])
     np.testing.assert_allclose(res.w, fig1_result.w[:4], atol=1e-10, rtol=0)
     assert np.array_equal(res.iterations, fig1_result.iterations[:4])
@@ -339,8 +339,8 @@ def test_mask_equals_truncation(fig1):
     mask = np.arange(500) < 300
     q[300:] = np.nan  # padding is never looked at
     J[300:] = 0.0
-    a = fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_iter=150)
-    b = fitting.estimate_ik_weights(q[:300], x[:300], J[:300], gamma=0.6, max_iter=150)
+    a = fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_steps=150)
+    b = fitting.estimate_ik_weights(q[:300], x[:300], J[:300], gamma=0.6, max_steps=150)
     assert np.allclose(a.w, b.w, atol=1e-12, rtol=0)
     assert np.allclose(a.error_history, b.error_history, atol=1e-12, rtol=0, equal_nan=True)
 
@@ -350,8 +350,8 @@ def test_failing_subject_is_flagged_others_go_on(fig1, fig1_result):
     q[5, 10, 2] = np.nan
     J[9, 3] = 0.0  # rank-deficient Jacobian
     with pytest.raises(ValueError, match="qdot"):
-        fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_iter=150)
-    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_iter=150, on_invalid="flag")
+        fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150)
+    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150, on_invalid="flag")
     st = np.asarray(res.status)
     assert st[5] == S.INVALID_INPUT and st[9] == S.INVALID_INPUT
     ok = np.setdiff1d(np.arange(100), [5, 9])
@@ -402,8 +402,12 @@ def test_bad_input_raises_clear_errors(fig1):
     for name in ("tol", "step_tol", "rank_tol", "ls_tol"):
         with pytest.raises(ValueError, match=name):
             est(q, x, J, **{name: -1.0})
-    with pytest.raises(ValueError, match="max_iter"):
-        est(q, x, J, max_iter=0)
+    with pytest.raises(ValueError, match="max_steps"):
+        est(q, x, J, max_steps=0)
+    with pytest.warns(DeprecationWarning, match="max_iter"), pytest.raises(ValueError, match="max_steps"):
+        est(q, x, J, max_iter=0)  # the old name, passed on under the new one
+    with pytest.raises(TypeError, match="max_iter.*max_steps"):
+        est(q, x, J, max_iter=5, max_steps=5)
     with pytest.raises(ValueError, match="w_max"):
         est(q, x, J, w_max=0.5)
     with pytest.raises(ValueError, match="on_invalid"):
@@ -597,7 +601,7 @@ def test_beta_of_estimated_weights_matches_the_paper():
         np.testing.assert_allclose({"Natural": W_NATURAL, "Viscous": W_VISCOUS}[cond], w, rtol=0.01)
     # the 4-DoF arm's single redundant degree of freedom makes Algorithm 1 slow: ≈ 3 500 updates
     res = fitting.estimate_ik_weights(np.stack(qd), np.stack(xds), np.stack([J, J]), gamma=0.0, fixed=[3],
-                                      step_tol=1e-9, max_iter=6000)
+                                      step_tol=1e-9, max_steps=6000)
     assert np.all(res.status == S.SUCCESSFUL)
     beta = np.asarray(fitting.contribution_coefficients(res.w))
     np.testing.assert_allclose(beta, np.array(list(BETA_PAPER.values())), atol=0.005)
@@ -667,7 +671,7 @@ def test_bootstrap_intervals_cover_the_truth():
     P = 150
     q, x, J = _trial_data(rng, P, 20, 3, w, 0.001, 0.003)
     # (to the fixed point: these data determine the weights to 0.3 %, the default tol is 0.1 %)
-    res = fitting.bootstrap_ik_weights(q, x, J, n_boot=100, key=jax.random.PRNGKey(4), gamma=0.6, max_iter=300,
+    res = fitting.bootstrap_ik_weights(q, x, J, n_boot=100, key=jax.random.PRNGKey(4), gamma=0.6, max_steps=300,
                                        tol=1e-5, step_tol=1e-9)
     lo, hi = np.asarray(res.lo), np.asarray(res.hi)
     assert res.samples.shape == (100, P, 3) and res.status.shape == (100, P)
@@ -685,7 +689,7 @@ def test_bootstrap_batch_equals_singles_and_bad_input():
     mask = np.ones(q.shape[:-1], bool)
     mask[1, 4:] = False  # a subject with fewer trials
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
-    kw = dict(n_boot=8, gamma=0.6, max_iter=80)
+    kw = dict(n_boot=8, gamma=0.6, max_steps=80)
     res = fitting.bootstrap_ik_weights(q, x, J, mask=mask, key=keys, **kw)
     for i in (0, 1):
         one = fitting.bootstrap_ik_weights(q[i], x[i], J[i], mask=mask[i], key=keys[i], **kw)
@@ -742,7 +746,7 @@ def test_lambda0_pmp_movements_give_back_W():
     res = fitting.estimate_ik_weights(np.asarray(traj.qdot).reshape(K, 3),
                                       np.asarray(traj.xdot).reshape(K, 2),
                                       np.asarray(J).reshape(K, 2, 3), gamma=0.6, tol=0.0,
-                                      step_tol=1e-10, max_iter=3000)
+                                      step_tol=1e-10, max_steps=3000)
     assert int(res.status) == S.STALLED  # a fixed point of the update (e > 0 with a null part)
     w = np.asarray(res.w)
     assert np.all(np.abs(w / w.max() - w_true) <= 0.05 * w_true), w
@@ -802,7 +806,7 @@ from _reference import ik_fig1_numpy
 q, x, J = ik_fig1_numpy(np.random.default_rng(2), n_reps=7, K=120)
 q[3, 5, 1] = np.nan  # a flagged item
 mask = np.ones((7, 120), bool); mask[5, 80:] = False  # a ragged item
-run = lambda devs: fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_iter=60,
+run = lambda devs: fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_steps=60,
                                               on_invalid="flag", devices=devs)
 one, two = run(jax.devices()[:1]), run(None)
 print(json.dumps({"devices": len(jax.devices()), "w1": np.asarray(one.w).tolist(),

@@ -478,8 +478,11 @@ def test_bad_input_equilibrium_and_fields(arm, free_arm, P):
         pj.arm_equilibrium(free_arm, np.zeros(5))
     with pytest.raises(ValueError, match="`K`"):
         pj.arm_equilibrium(free_arm, P[0], K=-free_arm.K)
-    with pytest.raises(ValueError, match="n_iter"):
-        pj.arm_equilibrium(free_arm, P[0], n_iter=0)
+    with pytest.raises(ValueError, match="max_steps"):
+        pj.arm_equilibrium(free_arm, P[0], max_steps=0)
+    for fn in (pj.arm_equilibrium, pj.equilibrium):  # the old keyword, passed on under the new one
+        with pytest.warns(DeprecationWarning, match="n_iter"), pytest.raises(ValueError, match="max_steps"):
+            fn(free_arm, P[0], n_iter=0)
     with pytest.raises(ValueError, match="broadcast"):
         pj.arm_equilibrium(free_arm, P[:3], K=np.tile(free_arm.K, (2, 1)))
     with pytest.raises(TypeError, match="arm"):

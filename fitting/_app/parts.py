@@ -172,7 +172,7 @@ def _ik_figures(ctx) -> dict:
     reps = 20 if ctx.quick else 100
     q, x, J = ik_fig1_data(jax.random.PRNGKey(ctx.seed), n_reps=reps + 3 * 10)
     gams = np.concatenate([np.full(reps, 0.6), np.repeat([0.0, 0.3, 0.9], 10)])
-    res = estimate_ik_weights(q, x, J, gamma=gams, max_iter=150)
+    res = estimate_ik_weights(q, x, J, gamma=gams, max_steps=150)
     w, hist = np.asarray(res.w), np.asarray(res.error_history)
     fig1 = gams == 0.6
     w_star = np.array([1.0, 0.8, 0.6, 0.4, 0.2])
@@ -193,7 +193,7 @@ def _ik_figures(ctx) -> dict:
     q3, x3, J3 = ik_fig3_data(k_null=0.3, k_task=2.0)
     g3 = np.array([0.0, 0.6, 0.8, 0.9])
     qb, xb, Jb = (np.broadcast_to(a, (4,) + a.shape) for a in (q3, x3, J3))
-    r3 = estimate_ik_weights(qb, xb, Jb, gamma=g3, tol=0.0, step_tol=1e-9, max_iter=3000)
+    r3 = estimate_ik_weights(qb, xb, Jb, gamma=g3, tol=0.0, step_tol=1e-9, max_steps=3000)
     w3 = np.asarray(r3.w)
     ax[2].bar(np.arange(4) - 0.15, w3[:, 0], 0.3, label="w1")
     ax[2].bar(np.arange(4) + 0.15, w3[:, 1], 0.3, label="w2 (truth 0.01)")

@@ -45,6 +45,7 @@ from pmpjax.internal import (
     pinv_apply_diag_soa,
     pinv_diag_lists,
     pytree_dataclass,
+    renamed_keywords,
     to_jax,
     to_soa,
     unflatten_batch,
@@ -59,7 +60,7 @@ class IKWeightsResult:
 
     ``w`` (..., n) weights in ``[w_min, 1]`` with ``max w = 1`` (over free joints); ``error`` (...,)
     the mean modelling error ``(1/K) Σ |q̇_k − q̇̄_k|`` of the last evaluation (Algorithm 1, line 8);
-    ``error_history`` (..., max_iter) one entry per iteration (NaN after the item stopped);
+    ``error_history`` (..., max_steps) one entry per iteration (NaN after the item stopped);
     ``iterations`` (...,) updates done; ``gamma`` (...,) the null-space ratio at the end;
     ``ls_gap`` (...,) ``max_i |log w_i − log w_i^LS|``, the relative distance from ``w`` to the
     least-squares weights of the same modelling error (one Gauss–Newton step; inf where the data do
@@ -76,7 +77,7 @@ class IKWeightsResult:
       joint that never moves, too few samples);
     - ``SCHEDULE_END``: with a γ schedule, the run stopped (γ → 1 stops the updates whatever the
       weights) at weights that fail the checks at the starting ratio, or on ``step_tol``;
-    - ``MAX_STEPS``: ``max_iter`` updates without a stop; ``NONFINITE``; ``INVALID_INPUT`` (only
+    - ``MAX_STEPS``: ``max_steps`` updates without a stop; ``NONFINITE``; ``INVALID_INPUT`` (only
       with ``on_invalid="flag"``).
 
     ``converged`` (...,) is ``status == SUCCESSFUL``.
@@ -271,7 +272,7 @@ def _ls_check(w, q, x, Jl, Jq, gamma, fixed, rank_tol):
     return determined, jnp.where(determined & jnp.isfinite(gap), gap, jnp.inf)
 
 
-def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol, max_iter,
+def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol, max_steps,
                       fixed):
     """Algorithm 1 on one chunk: ``qd`` (n, C, K), ``xd`` (m, C, K), ``Jc`` (m, n, C, K),
     ``valid`` (C, K), ``gamma0`` (C,). Iterates until every item of the chunk has stopped, then
@@ -352,7 +353,7 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
         )
 
     def cond(s):
-        return (s["it"] < max_iter) & ~jnp.all(s["done"])
+        return (s["it"] < max_steps) & ~jnp.all(s["done"])
 
     s0 = dict(
         w=jnp.ones((n, C, 1), qd.dtype),
@@ -360,7 +361,7 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
         gamma_prev=jnp.zeros((C,), qd.dtype),  # no null-space estimate before the first update
         gamma=gamma0.astype(qd.dtype),
         err=jnp.full((C,), jnp.nan, qd.dtype),
-        hist=jnp.full((max_iter, C), jnp.nan, qd.dtype),
+        hist=jnp.full((max_steps, C), jnp.nan, qd.dtype),
         iters=jnp.zeros((C,), jnp.int32),
         # items without a valid sample (flagged or padding) never start
         status=jnp.where(count == 0, Status.INVALID_INPUT, Status.MAX_STEPS).astype(jnp.int32),
@@ -389,10 +390,10 @@ def _algorithm1_chunk(qd, xd, Jc, valid, gamma0, rate, w_min, w_max, tol, step_t
 
 
 def _algorithm1_local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol, *,
-                      max_iter, fixed, chunk):
+                      max_steps, fixed, chunk):
     """All items of one device: ``qdot`` (B, K, n), ``xdot`` (B, K, m), ``J`` (B, K, m, n),
     ``mask`` (B, K), ``gamma0`` (B,). Items are padded to whole chunks of ``chunk`` (padding has no
-    valid sample, so it stops at once). Returns w (B, n), err (B,), hist (B, max_iter), …"""
+    valid sample, so it stops at once). Returns w (B, n), err (B,), hist (B, max_steps), …"""
     B0 = qdot.shape[0]
     pad = -B0 % chunk
     if pad:
@@ -400,7 +401,7 @@ def _algorithm1_local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step
         qdot, xdot, J, mask, gamma0 = (padB(a) for a in (qdot, xdot, J, mask, gamma0))
     B = qdot.shape[0]
     run = partial(_algorithm1_chunk, rate=rate, w_min=w_min, w_max=w_max, tol=tol,
-                  step_tol=step_tol, ls_tol=ls_tol, rank_tol=rank_tol, max_iter=max_iter, fixed=fixed)
+                  step_tol=step_tol, ls_tol=ls_tol, rank_tol=rank_tol, max_steps=max_steps, fixed=fixed)
 
     def one(c):  # one chunk, item-first -> component-leading (in cache), then iterate
         return run(*_prepare(*c[:4]), c[4])
@@ -418,10 +419,10 @@ def _algorithm1_local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step
 
 
 def _algorithm1_all(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol, *,
-                    max_iter, fixed, chunk, mesh=None):
+                    max_steps, fixed, chunk, mesh=None):
     """:func:`_algorithm1_local` on one device, or (``mesh``: a 1-D mesh with axis "items") on
     each device's share of the items (B divisible by the mesh size), without communication."""
-    local = partial(_algorithm1_local, max_iter=max_iter, fixed=fixed, chunk=chunk)
+    local = partial(_algorithm1_local, max_steps=max_steps, fixed=fixed, chunk=chunk)
     if mesh is None:
         return local(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol)
     items, rep = PartitionSpec("items"), PartitionSpec()
@@ -430,7 +431,7 @@ def _algorithm1_all(qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_t
         qdot, xdot, J, mask, gamma0, rate, w_min, w_max, tol, step_tol, ls_tol, rank_tol)
 
 
-_STATIC = ("max_iter", "fixed", "chunk", "mesh")
+_STATIC = ("max_steps", "fixed", "chunk", "mesh")
 # (inside a caller's jit the options do not apply, JAX takes them at the top level only: strict
 # sums, ≈ 4× slower)
 _algorithm1 = TopLevelOptionsJit(_algorithm1_all, _FAST_SUMS, static_argnames=_STATIC)
@@ -516,6 +517,7 @@ def _item_mesh(devices, B):
     return Mesh(np.asarray(devs), ("items",)) if len(devs) > 1 else None
 
 
+@renamed_keywords(max_iter="max_steps")
 def estimate_ik_weights(
     qdot,
     xdot,
@@ -527,7 +529,7 @@ def estimate_ik_weights(
     w_max: float | None = 1.0,
     tol: float = 1e-3,
     step_tol: float = 1e-6,
-    max_iter: int = 200,
+    max_steps: int = 200,
     gamma_rate: float | None = None,
     fixed=None,
     on_invalid: str = "raise",
@@ -553,7 +555,7 @@ def estimate_ik_weights(
     is in the units of the velocities (scaled-down data meet it at ``W = I``); ``step_tol`` stop
     (status ``STALLED``) when every weight changes by less than this (relative; 0: never) before
     the distance to the fixed point is below ``tol``: the update crawls (contraction factor near
-    1), as when the data barely determine the weights; ``max_iter`` iteration cap (status
+    1), as when the data barely determine the weights; ``max_steps`` iteration cap (status
     ``MAX_STEPS``); ``gamma_rate`` c of the schedule ``γ ← γ + c (1 − γ)`` after each iteration
     (None: constant; γ → 1 makes the updates vanish whatever the weights, so a scheduled run that
     stops is judged by the checks below at the starting ratio γ0, and reports ``SCHEDULE_END``
@@ -590,7 +592,7 @@ def estimate_ik_weights(
         raise ValueError(f"`w_min` must lie in (0, 1), got {w_min}")
     if w_max is not None and not float(w_max) >= 1.0:
         raise ValueError(f"`w_max` must be >= 1 or None, got {w_max}")
-    check_positive_int("max_iter", max_iter)
+    check_positive_int("max_steps", max_steps)
     for name, v in (("tol", tol), ("step_tol", step_tol), ("rank_tol", rank_tol), ("ls_tol", ls_tol)):
         if not (np.isfinite(float(v)) and float(v) >= 0):
             raise ValueError(f"`{name}` must be a finite number >= 0, got {v}")
@@ -631,7 +633,7 @@ def estimate_ik_weights(
         jnp.asarray(0.0 if gamma_rate is None else gamma_rate),
         jnp.asarray(float(w_min)), jnp.asarray(np.inf if w_max is None else float(w_max)),
         jnp.asarray(float(tol)), jnp.asarray(float(step_tol)), jnp.asarray(float(ls_tol)),
-        jnp.asarray(float(rank_tol)), max_iter=int(max_iter), fixed=fixed_t, chunk=-(-Bl // nc), mesh=mesh,
+        jnp.asarray(float(rank_tol)), max_steps=int(max_steps), fixed=fixed_t, chunk=-(-Bl // nc), mesh=mesh,
     )
     if mesh is not None:  # results back on one device, padding dropped
         out = jax.device_put(out, mesh.devices.flat[0])

@@ -107,7 +107,7 @@ def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_
 @functools.partial(fast_compile_jit, static_argnames=("site_id", "max_steps"))
 def _fit_blend(mx, site_id, P, K, targets, max_steps):
     def hand_of(z):
-        return arm_equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, n_iter=N_NEWTON)[1]
+        return arm_equilibrium_one(mx, site_id, _softmax_weights(z) @ P, K, max_steps=N_NEWTON)[1]
 
     def one(target):
         r = least_squares(lambda z, _: hand_of(z) - target, jnp.zeros(P.shape[0] - 1), max_steps=max_steps)
@@ -169,7 +169,7 @@ def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 5
 def _fit_stiffness(mx, q_set, q_obs, kappa0, max_steps):
     def resid(kappa, q_o):
         K = jnp.exp(kappa)
-        q = jax.vmap(lambda qs: arm_equilibrium_one(mx, None, qs, K, n_iter=N_NEWTON)[0])(q_set)
+        q = jax.vmap(lambda qs: arm_equilibrium_one(mx, None, qs, K, max_steps=N_NEWTON)[0])(q_set)
         return (q - q_o).reshape(-1)
 
     def one(q_o):

@@ -34,6 +34,7 @@ import numpy as np
 
 from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, row_chunks, unflatten_batch
 from .._base.compile import fast_compile_jit
+from .._base.deprecation import renamed_keywords
 from .._base.linalg import spd_solve
 from .._base.newton import newton_solve
 from .._base.pytree import pytree_dataclass
@@ -136,7 +137,7 @@ def _joint_part(y):
 
 
 def equilibrium_one(
-    chain: Chain, K, qr, x, q0, *, tol: float = 1e-10, max_iter: int = 50, check_minimum: bool = True
+    chain: Chain, K, qr, x, q0, *, tol: float = 1e-10, max_steps: int = 50, check_minimum: bool = True
 ):
     """One item (vmap it): ``K`` (n, n), ``qr`` (n,), ``x`` (m,), ``q0`` (n,).
 
@@ -149,7 +150,7 @@ def equilibrium_one(
         _kkt_newton_solve,
         (q0, jnp.zeros(x.shape, q0.dtype)),
         (chain, K, qr, x),
-        max_steps=int(max_iter),
+        max_steps=int(max_steps),
         tol=float(tol),
         step_cap=_STEP_CAP,
         measure=_joint_part,
@@ -161,7 +162,7 @@ def equilibrium_one(
     small = res <= 1e3 * tol * (1.0 + jnp.max(jnp.abs(qs)))
     status = jnp.where(
         ~finite, Status.NONFINITE, jnp.where(small, Status.SUCCESSFUL,
-                                             jnp.where(steps >= max_iter, Status.MAX_STEPS, Status.STALLED))
+                                             jnp.where(steps >= max_steps, Status.MAX_STEPS, Status.STALLED))
     )
     if check_minimum:
         is_min = _is_minimum(_lagrangian_hessian(chain, Ks, qs, ls), J)
@@ -169,13 +170,14 @@ def equilibrium_one(
     return q, lam, status, res, steps
 
 
-@partial(fast_compile_jit, static_argnames=("tol", "max_iter"))
-def _flat_solve(chain, K, qr, x, q0, *, tol, max_iter):
-    return jax.vmap(lambda k, r, t, q: equilibrium_one(chain, k, r, t, q, tol=tol, max_iter=max_iter))(
+@partial(fast_compile_jit, static_argnames=("tol", "max_steps"))
+def _flat_solve(chain, K, qr, x, q0, *, tol, max_steps):
+    return jax.vmap(lambda k, r, t, q: equilibrium_one(chain, k, r, t, q, tol=tol, max_steps=max_steps))(
         K, qr, x, q0
     )
 
 
+@renamed_keywords(max_iter="max_steps")
 def equilibrium_posture(
     chain: Chain,
     KJ,
@@ -184,7 +186,7 @@ def equilibrium_posture(
     q_init=None,
     *,
     tol: float = 1e-10,
-    max_iter: int = 50,
+    max_steps: int = 50,
 ) -> Equilibrium:
     """Equilibrium posture of the λ0-PMP: ``argmin ½ (q − q_rest)ᵀ KJ (q − q_rest)`` s.t. ``fk(q) = target``.
 
@@ -194,7 +196,7 @@ def equilibrium_posture(
     - ``q_rest``: (..., n) rest posture [rad].
     - ``target``: (..., m) task position (wrist: screen point [m]); must be reachable.
     - ``q_init``: optional (..., n) initial guess (default ``q_rest``; see module docstring).
-    - ``tol``: Newton stops when every step is below ``tol (1 + |q|_∞)``; ``max_iter`` bounds it.
+    - ``tol``: Newton stops when every step is below ``tol (1 + |q|_∞)``; ``max_steps`` bounds the steps.
 
     Leading axes of all arrays broadcast (targets × subjects, ...). Returns an
     :class:`Equilibrium` (``.q`` the posture, ``.lam``, ``.status``, ``.converged``,
@@ -203,7 +205,7 @@ def equilibrium_posture(
     and reverse mode); works under ``jit``/``vmap`` (validation then only checks shapes).
 
     **Raises:** ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
-    NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_iter``.
+    NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_steps``.
 
     **Compile time:** ≈ 2.4 s per chain for the first call of up to 64 postures and again for the
     first larger one (then chunks of 1024; under ``jit`` per power-of-two batch size), see
@@ -220,14 +222,14 @@ def equilibrium_posture(
     if q_init is not None:
         q_init = as_array("q_init", q_init, tail=(n,))
     check_positive("tol", tol)
-    check_positive_int("max_iter", max_iter)
+    check_positive_int("max_steps", max_steps)
     warn_without_x64()
     batch = broadcast_batch(KJ=(KJ, 2), q_rest=(q_rest, 1), target=(target, 1), q_init=(q_init, 1))
     dtype = jnp.result_type(float)
     q0 = q_rest if q_init is None else q_init
     B = math.prod(batch)
     args = ((KJ, 2), (q_rest, 1), (target, 1), (q0, 1))
-    opts = dict(tol=float(tol), max_iter=int(max_iter))
+    opts = dict(tol=float(tol), max_steps=int(max_steps))
     if is_concrete(chain, KJ, q_rest, target, q0):
         # Eager: padded to 64 rows or solved in chunks of 1024, so that a chain compiles at most
         # twice whatever the batch sizes (a compile costs seconds, 1024 wrist rows ≈ 5 ms).

@@ -20,6 +20,7 @@ import numpy as np
 
 from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
 from .._base.compile import fast_compile_jit
+from .._base.deprecation import renamed_keywords
 from .._base.profiles import minimum_jerk
 from .._base.pytree import pytree_dataclass
 from .._base.status import Status
@@ -116,9 +117,9 @@ class ArmEquilibrium:
         return self.status == Status.SUCCESSFUL
 
 
-def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
+def _equilibrium_one(mx, site_id, q_set, K, max_steps, tol, diagnostics=True):
     # The shared Newton solver (pmpjax._base.newton): residual K (θ − θ_set) + ∇V(θ), Newton
-    # matrix K + ∇²V from one MJX kinematics pass, 0.5 rad cap, n_iter steps; implicit gradients
+    # matrix K + ∇²V from one MJX kinematics pass, 0.5 rad cap, max_steps steps; implicit gradients
     # in (θ_set, K), the model's tangents ignored (consts).
     from .._base.newton import newton_solve
 
@@ -129,7 +130,7 @@ def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
     def solve(q, params, mx, rhs):
         return jnp.linalg.solve(jnp.diag(params[1]) + gravity_terms(mx, q)[1], rhs)
 
-    q, _ = newton_solve(residual, solve, q_set, (q_set, K), mx, max_steps=int(n_iter), step_cap=0.5)
+    q, _ = newton_solve(residual, solve, q_set, (q_set, K), mx, max_steps=int(max_steps), step_cap=0.5)
     if not diagnostics:  # lean version for fits: no residual/stability kinematics passes
         return q, (None if site_id is None else site_position(mx, site_id, q)), None, None
     g, H, d = gravity_terms(mx, jax.lax.stop_gradient(q))
@@ -141,20 +142,21 @@ def _equilibrium_one(mx, site_id, q_set, K, n_iter, tol, diagnostics=True):
     return q, hand, res, (res <= tol * (1.0 + jnp.max(Ks))) & stable
 
 
-def arm_equilibrium_one(mx, site_id: int | None, q_set, K, *, n_iter: int = 12):
+def arm_equilibrium_one(mx, site_id: int | None, q_set, K, *, max_steps: int = 12):
     """Internal surface (used by ``fitting``): equilibrium ``q`` (n,) of one arm for set-point
     ``q_set`` (n,) and stiffness ``K`` (n,), and the hand site position (3,) (``None`` when
     ``site_id`` is ``None``); no diagnostics. Differentiable in ``q_set`` and ``K`` by the
     implicit function theorem (forward and reverse mode). ``mx`` is ``CogArm.mjx_model``."""
-    q, hand, _, _ = _equilibrium_one(mx, site_id, q_set, K, int(n_iter), 0.0, diagnostics=False)
+    q, hand, _, _ = _equilibrium_one(mx, site_id, q_set, K, int(max_steps), 0.0, diagnostics=False)
     return q, hand
 
 
-def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
+@renamed_keywords(n_iter="max_steps")
+def arm_equilibrium(arm: CogArm, q_set, K=None, *, max_steps: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
     """Equilibrium posture of the springy arm under gravity for set-points ``q_set`` (..., n).
 
     Solves ``K (θ − θ_set) + ∇V(θ) = 0`` (springs balance gravity, no velocity) by Newton's method
-    from ``θ_set`` (``n_iter`` steps) with ``∇V`` and the exact ``∇²V`` in closed form from one MJX
+    from ``θ_set`` (at most ``max_steps`` steps) with ``∇V`` and the exact ``∇²V`` in closed form from one MJX
     kinematics pass (autodiff through MJX kinematics would cost minutes of compile time);
     derivatives by the implicit function theorem (``jax.custom_jvp``, forward and reverse mode).
     ``K`` (..., n) [Nm/rad], default the arm's. Leading axes broadcast. ``status`` per item;
@@ -168,7 +170,7 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     n = arm.n
     q_set = check_set_point("q_set", q_set, n)
     K = check_stiffness("K", arm.K if K is None else K, n)
-    n_iter = check_positive_int("n_iter", n_iter)
+    max_steps = check_positive_int("max_steps", max_steps)
     check_positive("tol", tol)
     batch = broadcast_batch(q_set=(q_set, 1), K=(K, 1))
     B = math.prod(batch)
@@ -177,13 +179,14 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float 
     q, hand, res, status = (
         unflatten_batch(a, batch, B)
         for a in _equilibrium_batch(
-            arm.mjx_model, arm.layout.hand_site, pad_rows(qs, Bp), pad_rows(Ks, Bp), n_iter, float(tol)
+            arm.mjx_model, arm.layout.hand_site, pad_rows(qs, Bp), pad_rows(Ks, Bp), max_steps, float(tol)
         )
     )
     return ArmEquilibrium(q=q, hand=hand, residual=res, status=status)
 
 
-def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
+@renamed_keywords(n_iter="max_steps")
+def equilibrium(arm: CogArm, q_set, K=None, *, max_steps: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
     """Deprecated alias of :func:`arm_equilibrium` (the name was easy to confuse with
     :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium)."""
     warnings.warn(
@@ -191,12 +194,12 @@ def equilibrium(arm: CogArm, q_set, K=None, *, n_iter: int = 12, tol: float = 1e
         DeprecationWarning,
         stacklevel=2,
     )
-    return arm_equilibrium(arm, q_set, K, n_iter=n_iter, tol=tol)
+    return arm_equilibrium(arm, q_set, K, max_steps=max_steps, tol=tol)
 
 
-@functools.partial(fast_compile_jit, static_argnames=("site_id", "n_iter", "tol"))
-def _equilibrium_batch(mx, site_id, q_set, K, n_iter, tol):
-    q, hand, res, ok = jax.vmap(lambda a, b: _equilibrium_one(mx, site_id, a, b, n_iter, tol))(q_set, K)
+@functools.partial(fast_compile_jit, static_argnames=("site_id", "max_steps", "tol"))
+def _equilibrium_batch(mx, site_id, q_set, K, max_steps, tol):
+    q, hand, res, ok = jax.vmap(lambda a, b: _equilibrium_one(mx, site_id, a, b, max_steps, tol))(q_set, K)
     small = res <= tol * (1.0 + jnp.max(jax.lax.stop_gradient(K), axis=-1))
     finite = jnp.isfinite(res) & jnp.all(jnp.isfinite(q), axis=-1)
     status = jnp.where(
