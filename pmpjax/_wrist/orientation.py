@@ -50,7 +50,22 @@ def _convention(convention):
 
 
 def wrist_rotation(q):
-    """Hand orientation ``R(q)`` (..., 3, 3) of wrist joint angles ``q`` (..., 3) [rad] (Eq 6)."""
+    """Hand orientation ``R(q)`` of wrist joint angles (Eq 6).
+
+    ``R(q) = exp(−ê_x q_PS) exp(ê_z q_FE) exp(ê_y q_RUD)``: rotations about x, z and y, in that order.
+
+    **Arguments:**
+
+    - ``q``: (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+
+    **Returns:**
+
+    (..., 3, 3) rotation matrices.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
+    """
     return eager_rows(_rotation, _arr("q", q, (3,)), 1)
 
 
@@ -66,10 +81,22 @@ def _hat(r):
 
 
 def quat_from_matrix(R):
-    """Unit quaternion ``(w, x, y, z)`` (..., 4), ``w >= 0``, of rotation matrices ``R`` (..., 3, 3).
+    """Unit quaternions of rotation matrices.
 
     Shepperd's method: the largest of ``(w², x², y², z²)`` is computed from the diagonal and the
     others from off-diagonal sums, so the result is accurate for every rotation.
+
+    **Arguments:**
+
+    - ``R``: (..., 3, 3) rotation matrices.
+
+    **Returns:**
+
+    (..., 4) unit quaternions ``(w, x, y, z)``, scalar first, with ``w >= 0``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
     """
     return eager_rows(_quat_from_matrix, _arr("R", R, (3, 3)), 2)
 
@@ -99,7 +126,20 @@ def _quat_from_matrix(R):
 
 
 def matrix_from_quat(quat):
-    """Rotation matrix (..., 3, 3) of quaternions ``(w, x, y, z)`` (..., 4) (normalised first)."""
+    """Rotation matrices of quaternions.
+
+    **Arguments:**
+
+    - ``quat``: (..., 4) quaternions ``(w, x, y, z)``, scalar first (normalised first).
+
+    **Returns:**
+
+    (..., 3, 3) rotation matrices.
+
+    **Raises:**
+
+    - ``ValueError`` naming ``quat`` for a wrong trailing shape, NaN/inf or a zero quaternion.
+    """
     return eager_rows(_matrix_from_quat, _quat("quat", quat), 1)
 
 
@@ -118,8 +158,22 @@ def _matrix_from_quat(quat):
 
 
 def rotvec_from_quat(quat, *, convention: str = "axis_angle"):
-    """Rotation vector (..., 3) of quaternions (..., 4); ``convention`` "axis_angle" (θ n, rad)
-    or "rodrigues" (tan(θ/2) n)."""
+    """Rotation vectors of quaternions.
+
+    **Arguments:**
+
+    - ``quat``: (..., 4) quaternions ``(w, x, y, z)``, scalar first.
+    - ``convention``: ``"axis_angle"`` (``θ n``, θ in rad) or ``"rodrigues"`` (``tan(θ/2) n``).
+
+    **Returns:**
+
+    (..., 3) rotation vectors.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape, NaN/inf, a zero quaternion or an
+      unknown ``convention``.
+    """
     _convention(convention)
     return eager_rows(lambda q: _rotvec_from_quat(q, convention), _quat("quat", quat), 1)
 
@@ -140,7 +194,20 @@ def _rotvec_from_quat(quat, convention):
 
 
 def quat_from_rotvec(r):
-    """Quaternion ``(w, x, y, z)`` (..., 4) of axis·angle rotation vectors ``r`` (..., 3) [rad]."""
+    """Quaternions of axis·angle rotation vectors.
+
+    **Arguments:**
+
+    - ``r``: (..., 3) rotation vectors ``θ n`` [rad].
+
+    **Returns:**
+
+    (..., 4) unit quaternions ``(w, x, y, z)``, scalar first.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
+    """
     return eager_rows(_quat_from_rotvec, _arr("r", r, (3,)), 1)
 
 
@@ -156,22 +223,62 @@ def _quat_from_rotvec(r):
 
 
 def rotvec_from_matrix(R, *, convention: str = "axis_angle"):
-    """Rotation vector (..., 3) of rotation matrices (..., 3, 3) (see :func:`rotvec_from_quat`)."""
+    """Rotation vectors of rotation matrices (as :func:`rotvec_from_quat`).
+
+    **Arguments:**
+
+    - ``R``: (..., 3, 3) rotation matrices.
+    - ``convention``: ``"axis_angle"`` (``θ n``, θ in rad) or ``"rodrigues"`` (``tan(θ/2) n``).
+
+    **Returns:**
+
+    (..., 3) rotation vectors.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape, NaN/inf or an unknown
+      ``convention``.
+    """
     _convention(convention)
     return rotvec_from_quat(quat_from_matrix(R), convention=convention)
 
 
 def matrix_from_rotvec(r):
-    """Rotation matrix ``exp(r̂)`` (..., 3, 3) of rotation vectors ``r`` (..., 3) [rad]."""
+    """Rotation matrices ``exp(r̂)`` of rotation vectors.
+
+    **Arguments:**
+
+    - ``r``: (..., 3) rotation vectors ``θ n`` [rad].
+
+    **Returns:**
+
+    (..., 3, 3) rotation matrices.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
+    """
     return matrix_from_quat(quat_from_rotvec(_arr("r", r, (3,))))
 
 
 def joint_angles_from_matrix(R):
-    """Wrist joint angles ``(q_PS, q_FE, q_RUD)`` (..., 3) [rad] with ``R(q) = R`` (inverse of Eq 6).
+    """Wrist joint angles with ``R(q) = R`` (the inverse of Eq 6).
 
     From ``R = Rx(−a) Rz(b) Ry(c)``: ``R[0,1] = −sin b``, ``(R[0,0], R[0,2]) = cos b (cos c, sin c)``,
     ``(R[1,1], R[2,1]) = cos b (cos a, −sin a)``. Branch ``|q_FE| < π/2``; undefined at gimbal lock
     ``|q_FE| = π/2`` (the wrist points along the screen, outside every reachable target).
+
+    **Arguments:**
+
+    - ``R``: (..., 3, 3) rotation matrices (hand to world).
+
+    **Returns:**
+
+    (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
     """
     return eager_rows(_joint_angles_from_matrix, _arr("R", R, (3, 3)), 2)
 
@@ -185,26 +292,81 @@ def _joint_angles_from_matrix(R):
 
 
 def joint_angles_from_quat(quat):
-    """Wrist joint angles (..., 3) [rad] of quaternions ``(w, x, y, z)`` (..., 4)."""
+    """Wrist joint angles of quaternions (the inverse of Eq 6).
+
+    **Arguments:**
+
+    - ``quat``: (..., 4) hand-to-world quaternions ``(w, x, y, z)``, scalar first.
+
+    **Returns:**
+
+    (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming ``quat`` for a wrong trailing shape, NaN/inf or a zero quaternion.
+    """
     return joint_angles_from_matrix(matrix_from_quat(_quat("quat", quat)))
 
 
 def quat_from_joint_angles(q):
-    """Quaternion ``(w, x, y, z)`` (..., 4) of wrist joint angles ``q`` (..., 3) [rad]."""
+    """Quaternions of wrist joint angles (Eq 6).
+
+    **Arguments:**
+
+    - ``q``: (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+
+    **Returns:**
+
+    (..., 4) unit quaternions ``(w, x, y, z)``, scalar first.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
+    """
     return quat_from_matrix(wrist_rotation(_arr("q", q, (3,))))
 
 
 def rotvec_from_joint_angles(q, *, convention: str = "axis_angle"):
-    """Rotation vector ``r`` (..., 3) of the wrist posture ``q`` (..., 3) [rad] (design §3.4)."""
+    """Rotation vectors of wrist postures (the coordinates of Donders surfaces).
+
+    **Arguments:**
+
+    - ``q``: (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+    - ``convention``: ``"axis_angle"`` (``θ n``, θ in rad) or ``"rodrigues"`` (``tan(θ/2) n``).
+
+    **Returns:**
+
+    (..., 3) rotation vectors ``r``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape, NaN/inf or an unknown
+      ``convention``.
+    """
     _convention(convention)
     return rotvec_from_matrix(wrist_rotation(_arr("q", q, (3,))), convention=convention)
 
 
 def torsion_between(R_ref, R):
-    """Signed angle [rad] of ``R_refᵀ R`` about the hand's pointing axis ``e_x`` (...,).
+    """Signed torsion of ``R`` relative to ``R_ref`` about the hand's pointing axis ``e_x``.
 
     For two postures pointing the same way, ``R_refᵀ R`` is a pure rotation about ``e_x`` and this
-    is exactly its angle; otherwise it is the torsional component ``atan2(M21 − M12, M11 + M22)``.
+    is exactly its angle; otherwise it is the torsional component ``atan2(M21 − M12, M11 + M22)`` of
+    ``M = R_refᵀ R``.
+
+    **Arguments:**
+
+    - ``R_ref``: (..., 3, 3) reference orientations.
+    - ``R``: (..., 3, 3) orientations (leading axes broadcast with ``R_ref``'s).
+
+    **Returns:**
+
+    (...,) angles [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
     """
     return _torsion_between(_arr("R_ref", R_ref, (3, 3)), _arr("R", R, (3, 3)))
 
