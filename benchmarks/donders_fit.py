@@ -10,12 +10,20 @@ at the observed posture), same parameterisation and torsion residual, one start.
 
 Usage: ``python benchmarks/donders_fit.py [--sizes 1 10 100 1000] [--scipy-budget 240]``.
 
-Latest figures (2026-11-22 11:15 UTC, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, quiet machine;
-JAX: 2 starts per subject, chunks of 16 subjects, coefficient-space identifiability report;
-SciPy: 1 start; defaults ``--sizes 1 10 100 1000 --scipy-budget 240``)::
+Latest figures (2026-12-02 01:25–01:35 UTC, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, idle
+machine (load 1.2–1.6); JAX: 2 starts per subject, chunks of 16 subjects, coefficient-space
+identifiability report; SciPy: 1 start; ``--sizes 1000 --scipy-subjects 2``)::
 
-    SciPy loop: 33.3 s/subject over 8 subjects (0.0300 subjects/s; time-boxed at 240 s)
+    SciPy loop: 69.4 s/subject over 2 subjects (nfev 42, 38)
+    subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
+        1000        17.9    399.87       399.9        2.50      174     0.993
+    floor: equilibria cost 170.7 ms/subject at each start's own steps (mean 19.1), 422.3 ms/subject
+    at the chunk's slowest start (mean 48.4)
 
+The smaller sizes, from the last run of the default sizes (2026-11-22 11:15 UTC, same machine,
+quiet; SciPy time-boxed at 240 s)::
+
+    SciPy loop: 33.3 s/subject over 8 subjects (0.0300 subjects/s)
     subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
            1        11.6      0.30       296.5        3.37      112     1.000
           10        11.8      2.47       247.1        4.05      135     1.000
@@ -23,57 +31,18 @@ SciPy: 1 start; defaults ``--sizes 1 10 100 1000 --scipy-budget 240``)::
         1000         0.0    242.35       242.3        4.13      138     0.993
     (1000: compile 0.0 = the 16-subject chunk's executable reused)
 
-Idle re-run 2026-12-02 01:25–01:35 UTC after the layout changes (load 1.2–1.6), ``--sizes 1000
---scipy-subjects 2``::
+Target (≥ 100× the SciPy loop at 1000 subjects): met, 174× (138× in the default-size run; the
+single-threaded SciPy loop varies more with the machine's load than the JAX batch, so only
+same-run ratios count). The 0.7 % of subjects not converged are flagged per subject
+(``converged``, ``status``) and do not stop the others.
 
-    SciPy loop: 69.4 s/subject over 2 subjects (nfev 42, 38; 33.3 s/subject on 2026-11-22)
-    subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
-        1000        17.9    399.87       399.9        2.50      174     0.993
-    floor: equilibria cost 170.7 ms/subject at each start's own steps (mean 19.1), 422.3 ms/subject
-    at the chunk's slowest start (mean 48.4)
-
-174× the SciPy loop in the same run (target ≥ 138× kept). Both sides ran slower than on
-2026-11-22 (JAX 400 vs 242 ms/subject, SciPy 69 vs 33 s/subject): the machine, not the code,
-since the same-run ratio rose. The fit costs 2.3× the equilibria at each start's own step count
-and 0.95× the bound set by each chunk's slowest start.
-
-Re-run 2026-12-01 18:10–18:50 UTC after the shared Newton solver (``pmpjax._base.newton``) and
-the ``Status`` codes replaced the equilibria's own loop, on the same machine shared by 7 sessions
-(load average 18–21 throughout; every figure is inflated ~20–30× and only same-run ratios mean
-anything): SciPy loop 696.9 s/subject (1 subject; 33.3 s when quiet), JAX 1 subject: compile
-399.2 s, run 8.45 s, 82× SciPy (112× when quiet). The 1000-subject row (≈ 2 h at that load) was
-not run in the session. ``--sizes 16 --scipy-subjects 1`` (18:50–19:10, load 19–22)::
-
-    SciPy loop: 336.6 s/subject over 1 subject (nfev 9; a different subject from the run above,
-    nfev 42: one SciPy subject is a noisy baseline, the quiet run averages 8)
-    subjects compile [s]   run [s]  ms/subject  subjects/s  x SciPy converged
-          16       282.8     73.60      4599.9        0.22       73     1.000
-    floor: one residual+Jacobian pass of a chunk (16x2 starts) 2.385 s; equilibria cost 3269.6
-    ms/subject at each start's own steps (mean 20.9), 9687.6 ms/subject at the chunk's slowest
-    start (mean 64.0)
-
-So the fit costs ~1.4× the equilibria it needs at each start's own LM step count (the floor: 500
-implicit equilibria and their 8-tangent Jacobian per LM step); the rest is vmapped lanes waiting
-for the slowest start of their chunk. (The chunked bound, 3× the floor, is not reached: the floor
-pass is timed at the starts, where the model's equilibria lie farther from the observed postures
-each Newton loop starts from than near the optimum, so it likely over-counts Newton steps.)
-The ≥ 138× target needs the quiet-machine re-run: ``python benchmarks/donders_fit.py``.
-
-Target (>= 100x the SciPy loop at 1000 subjects) met: 138x on the quiet machine. An earlier run
-under load 3–5 gave 60.1 s/subject for SciPy (2 subjects in 60 s) and 329.6 ms/subject for JAX
-(182x): the single-threaded SciPy loop slows more under load than the JAX batch. Before the
-unrolled KKT solve (same machine, load 5–10, chunks of 100, LAPACK KKT solves): 1163.5 ms/subject
-at 1000 subjects, 47x. The 0.7 % of subjects not converged are flagged per subject (``converged``,
-``status``) and do not stop the others.
-
-What changed: (1) the 5×5 indefinite KKT solves of the equilibrium Newton loop and of its
-implicit JVP (one per LM parameter tangent under ``jacfwd``) are an augmented-Lagrangian
-elimination with unrolled SPD solves (``pmpjax._pmp.equilibria._kkt_solve``) instead of a batched
-tiny LAPACK LU: equilibria + their Jacobian 1.75× faster; the factors depend on primals only
-and are shared by all tangents. (2) Chunks of 16 instead of 100 subjects: a vmapped LM (and the
-vmapped Newton loop inside it) runs every lane until the slowest start of its chunk finishes
-(median ~15 LM steps, slowest 30–100), so smaller chunks waste fewer lane-iterations while
-16 × 2 × 512 equilibria per Newton iteration still fill the vector units.
+Reading the floor: the fit costs 2.3× the equilibria it needs at each start's own LM step count
+(500 implicit equilibria and their 8-tangent Jacobian per LM step) and 0.95× the bound set by each
+chunk's slowest start: the rest is vmapped lanes waiting for the slowest start of their chunk
+(median ~15 LM steps, slowest 30–100), which is why chunks hold 16 subjects, not 100. The 5×5
+indefinite KKT solves of the equilibrium Newton loop and of its implicit JVP are an
+augmented-Lagrangian elimination with unrolled SPD solves, whose factors depend on primals only
+and are shared by all tangents.
 """
 
 from __future__ import annotations
