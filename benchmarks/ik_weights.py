@@ -16,64 +16,43 @@ after each stage (so a partial run leaves its figures). The script sets
 core alone: the baseline is a single-threaded Python loop, while even one XLA:CPU device spreads
 each large fused loop over its intra-op thread pool (CPU time ≈ 1.9× wall time).
 
-Latest run (2026-12-01, same machine, after the honest-status change to Algorithm 1's loop: the
-per-item stopping rule now picks one of the ``pj.Status`` codes, O(items) work per iteration, the
-per-sample pass unchanged; weights agree with the baseline to 1.4e-13, 1 vs 2 devices to 0): the
-machine was shared with six other sessions' test suites, load average 16.8 at start and 19.9 at
-end on 2 cores, so every rate is 10–40× below its idle value and the ratios measure contention,
-not the code: baseline 0.140 subjects/s, 1 core 128.9, 1 device 75.8, 2 devices 59.0 (542x; 1 core
-922x); compile + first run 80–86 s; real data 123 s / 167 s. Rerun on an idle machine to refresh
-the table below (the ≥ 1 600x target is the idle figure; the code path it times is unchanged).
-
-Idle re-run 2026-12-02 01:23 UTC (after the layout changes: IK weights flatten their batch with the
-shared ``flatten_batch``; load 1.2 → 1.4): baseline 0.697 subjects/s (this run's SciPy loop was
-slower than on 11-22), 1 core 623, 1 device 1218, 2 devices 1043 subjects/s: **1748×** (1 core
-894×); compile + first run 4.9 s; weights agree with the baseline to 1.4e-13; batch scaling B = 1:
-187, 10: 615, 100: 1190, 1000: 1400 subjects/s; real data point estimate 9.3 s, bootstrap 8.4 s.
-
-Figures on an idle machine (2026-11-22, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, float64,
-jax 0.10.2; shared machine, load average 1.8 at start and 1.5 at end):
+Latest figures (2026-12-02 01:23 UTC, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, float64,
+jax 0.10.2; idle machine, load average 1.2 at start and 1.4 at end):
 
 | implementation                                             | subjects/s | compile+1st run [s] |
 |------------------------------------------------------------|-----------:|--------------------:|
-| NumPy/SciPy per-sample loop + QP (10 subj., 1 core)        |      1.359 |                     |
-| JAX estimate_ik_weights, 1 device pinned to 1 core         |       2216 |                     |
-| JAX estimate_ik_weights, 1 device                          |       3440 |                 2.6 |
-| JAX estimate_ik_weights, 2 devices (items split)           |       4111 |                 2.8 |
+| NumPy/SciPy per-sample loop + QP (10 subj., 1 core)        |      0.697 |                     |
+| JAX estimate_ik_weights, 1 device pinned to 1 core         |        623 |                     |
+| JAX estimate_ik_weights, 1 device                          |       1218 |                 4.9 |
+| JAX estimate_ik_weights, 2 devices (items split)           |       1043 |                     |
 
-speed-up vs baseline: 3025x (best), 1 device 2531x, 1 core 1631x; weights agree with the
-baseline to 1.5e-13, 1 vs 2 devices to 0.0e+00.
-batch scaling (subjects/s, default devices): B=1: 387, B=10: 1.37e+03, B=100: 3.59e+03,
-B=1000: 3.85e+03.
-real data (4 subjects x 6 tasks): point estimate 5.4 s, bootstrap (20 replicates,
-25 samples/motion) 5.3 s.
+speed-up vs baseline: 1748× (best), 1 core alone 894×; weights agree with the baseline to
+1.4e-13, 1 vs 2 devices to 0. Batch scaling (subjects/s, default devices): B = 1: 187, 10: 615,
+100: 1190, 1000: 1400. Real data (4 subjects × 6 tasks): point estimate 9.3 s, bootstrap (20
+replicates, 25 samples/motion) 8.4 s. Target (≥ 1 000× the baseline): met, also by one core alone.
+The baseline's own rate varies twofold between runs on this shared machine (1.36 subjects/s in
+the last quiet run of the full table, where the best JAX rate was 4111 subjects/s, 3025×): only
+same-run ratios count.
 
-A run minutes earlier (load 1.0–1.4): baseline 1.51, 1 core 2048, 1 device 3625, 2 devices 4594
-subjects/s (3036x; 1 device 2396x, 1 core 1354x); real data 4.2 s / 4.4 s. The target of 1 000x
-is met, also by one core alone. Before this rewrite (same workload): 306–458 vs 1.1–1.9
-subjects/s (≈ 250–400x), compile 7.6 s, real data 18.0 s / 20.2 s.
+Where the time goes (per call of 0.22–0.29 s at B = 1 000, 1 device, each part measured back to
+back in one process):
 
-Where the time went and what changed (each measured back to back in one process):
-
-- Algorithm 1 per iteration is now one fused pass over the samples (was ≈ 14 loops writing
-  intermediates): the 3 × 3 solve is the adjugate (one division; XLA:CPU ends a fused loop at each
-  LDLᵀ division with several users), and the previous iteration's ``v̄`` is recomputed from its
-  weights instead of carried (writing it out also split the pass): 2.1× on the kernel.
+- The Algorithm-1 kernel, 0.19–0.23 s (≈ 16 ns per sample-iteration per core: two 3 × 3 weighted
+  pseudo-inverse solves, the error and 51 running sums, ≈ 300 flops). Each iteration is one fused
+  pass over the samples: the 3 × 3 solve is the adjugate (one division; XLA:CPU ends a fused loop at
+  each LDLᵀ division with several users), and the previous iteration's ``v̄`` is recomputed from its
+  weights instead of carried (writing it out would split the pass).
 - The reductions over samples are compiled with reassociation allowed (``xla_cpu_enable_fast_math``
-  with NaN/inf/division/function semantics kept), so XLA:CPU vectorises them: 3.8× on the kernel
-  (0.86 → 0.23 s at B = 1 000). Weights move by rounding only: vs the strict-order kernel 2e-13 for
-  99 % of the 1 000 subjects, 2e-11 for the worst-conditioned one, whose float64 NumPy baseline is
-  itself 6e-9 from an extended-precision (long double) run of the algorithm.
-- Input screening (NaN/inf, rank of J) moved from NumPy (0.23–0.55 s per call) to one jitted pass
-  (0.03 s); inputs are passed to XLA without a copy when aligned (0.06 s); the layout change to
-  component-leading is done per chunk in cache (prologue 0.11 → 0.02 s).
-- Splitting items over 2 devices (``shard_map``, no communication) gives 0.9–1.27× over 1 device:
-  one device already uses both cores for the big fused loops (pinned to one core: 0.55–0.65× of
-  1 device).
-- Now, per call of 0.22–0.29 s at B = 1 000 (1 device): the Algorithm-1 kernel 0.19–0.23 s
-  (≈ 16 ns per sample-iteration per core: two 3 × 3 weighted pseudo-inverse solves, the error
-  and 51 running sums, ≈ 300 flops), screening 0.03 s, the rest < 0.01 s. Tried and dropped:
-  chunks of 10/20/100/200/1 000 items (50 is best), 512-bit vectors (no gain).
+  with NaN/inf/division/function semantics kept), so XLA:CPU vectorises them (3.8× on the kernel).
+  Weights move by rounding only: against the strict-order kernel 2e-13 for 99 % of the 1 000
+  subjects, 2e-11 for the worst-conditioned one, whose float64 NumPy baseline is itself 6e-9 from
+  an extended-precision (long double) run of the algorithm.
+- Input screening (NaN/inf, rank of J) in one jitted pass, 0.03 s; inputs passed to XLA without a
+  copy when aligned; the component-leading layout made per chunk in cache; the rest < 0.01 s.
+- Splitting items over 2 devices (``shard_map``, no communication) gives 0.86–1.27× over 1 device:
+  one device already uses both cores for the big fused loops (pinned to one core: 0.5–0.65× of
+  1 device). Chunks of 50 items are best (10/20/100/200/1 000 measured); 512-bit vectors give
+  nothing.
 """
 
 from __future__ import annotations
