@@ -44,7 +44,12 @@ PRIMITIVES = (
 
 
 def default_primitives():
-    """The four primitives ``P`` (4, 6) [rad] named in ``PRIMITIVE_NAMES`` (rest, down, up, side)."""
+    """The four postural primitives of the shipped arm, named in ``PRIMITIVE_NAMES``.
+
+    **Returns:**
+
+    (4, 6) set-points ``P`` [rad]: rest, down, up, side.
+    """
     return to_jax(np.asarray(PRIMITIVES, dtype=float))
 
 
@@ -61,9 +66,25 @@ def check_stiffness(name: str, K, n: int):
 
 
 def blend(alpha, P, *, atol: float = 1e-9):
-    """Superposition ``Σ_i α_i P_i`` (..., n) of primitives ``P`` (k, n) with weights ``alpha``
-    (..., k), ``Σ α_i = 1`` (checked to ``atol`` when concrete; ``ValueError`` naming ``alpha``).
-    Negative weights are allowed (extrapolation) but leave the region the primitives span."""
+    """Superposition ``Σ_i α_i P_i`` of primitives (Williamson 1996).
+
+    Negative weights are allowed (extrapolation) but leave the region the primitives span.
+
+    **Arguments:**
+
+    - ``alpha``: (..., k) weights with ``Σ α_i = 1``.
+    - ``P``: (k, n) primitives (set-points [rad]), e.g. :func:`default_primitives`.
+    - ``atol``: tolerance of the check ``|Σ α_i − 1| <= atol`` (made when ``alpha`` is concrete).
+
+    **Returns:**
+
+    (..., n) the blended set-point [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming ``alpha`` when its weights do not sum to 1, or naming the argument for
+      wrong shapes or NaN/inf.
+    """
     P = _check_primitives(P)
     k = P.shape[-2]
     alpha = as_array("alpha", alpha, tail=(k,))
@@ -75,8 +96,21 @@ def blend(alpha, P, *, atol: float = 1e-9):
 
 
 def winner_take_all(scores, P):
-    """Winner-take-all: the primitive ``P[argmax(scores)]`` (..., n) of ``P`` (k, n) for
-    activation ``scores`` (..., k) — one primitive has control of the arm."""
+    """Winner-take-all: the primitive ``P[argmax(scores)]``; one primitive has control of the arm.
+
+    **Arguments:**
+
+    - ``scores``: (..., k) activations.
+    - ``P``: (k, n) primitives (set-points [rad]).
+
+    **Returns:**
+
+    (..., n) the winning set-point [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes or NaN/inf.
+    """
     P = _check_primitives(P)
     scores = to_jax(as_array("scores", scores, tail=(P.shape[-2],)), float)
     return _winner(scores, P)
@@ -101,11 +135,19 @@ def _check_primitives(P):
 
 @pytree_dataclass
 class ArmEquilibrium:
-    """Static posture of the springy arm: ``q`` (..., n) [rad], ``hand`` (..., 3) [m],
-    ``residual`` (...,) |K (q − θ_set) + ∇V|_∞ [Nm], ``status`` (...,) int (:class:`pmpjax.Status`:
-    ``SUCCESSFUL`` = residual small and the Hessian ``K + ∇²V`` positive definite, a stable
-    equilibrium; ``NOT_MINIMUM``, ``MAX_STEPS`` (residual not small), ``NONFINITE``);
-    ``converged`` = ``status == 0``."""
+    """Static posture of the springy arm (the result of :func:`arm_equilibrium`).
+
+    **Fields:**
+
+    - ``q``: (..., n) posture [rad].
+    - ``hand``: (..., 3) hand position [m].
+    - ``residual``: (...,) ``|K (q − θ_set) + ∇V|_∞`` [Nm].
+    - ``status``: (...,) int :class:`pmpjax.Status`: ``SUCCESSFUL`` = residual small and the Hessian
+      ``K + ∇²V`` positive definite, a stable equilibrium; ``NOT_MINIMUM``, ``MAX_STEPS`` (residual
+      not small), ``NONFINITE``.
+
+    ``converged`` = ``status == 0``.
+    """
 
     q: jax.Array
     hand: jax.Array
@@ -153,15 +195,30 @@ def arm_equilibrium_one(mx, site_id: int | None, q_set, K, *, max_steps: int = 1
 
 @renamed_keywords(n_iter="max_steps")
 def arm_equilibrium(arm: CogArm, q_set, K=None, *, max_steps: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
-    """Equilibrium posture of the springy arm under gravity for set-points ``q_set`` (..., n).
+    """Equilibrium posture of the springy arm under gravity for set-points ``q_set``.
 
     Solves ``K (θ − θ_set) + ∇V(θ) = 0`` (springs balance gravity, no velocity) by Newton's method
-    from ``θ_set`` (at most ``max_steps`` steps) with ``∇V`` and the exact ``∇²V`` in closed form from one MJX
-    kinematics pass (autodiff through MJX kinematics would cost minutes of compile time);
-    derivatives by the implicit function theorem (``jax.custom_jvp``, forward and reverse mode).
-    ``K`` (..., n) [Nm/rad], default the arm's. Leading axes broadcast. ``status`` per item;
-    converged when ``residual <= tol·(1 + max K)`` and the equilibrium is stable.
-    (Not :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium of a chain.)
+    from ``θ_set`` with ``∇V`` and the exact ``∇²V`` in closed form from one MJX kinematics pass
+    (autodiff through MJX kinematics would cost minutes of compile time); derivatives by the
+    implicit function theorem (``jax.custom_jvp``, forward and reverse mode). Leading axes
+    broadcast. Not :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium of a chain.
+
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm` (:func:`load_arm`).
+    - ``q_set``: (..., n) set-points [rad].
+    - ``K``: (..., n) joint stiffness [Nm/rad], positive; default the arm's.
+    - ``max_steps``: Newton steps at most.
+    - ``tol``: converged when ``residual <= tol·(1 + max K)`` and the equilibrium is stable.
+
+    **Returns:**
+
+    An :class:`ArmEquilibrium` with a ``status`` per item.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm; ``ValueError`` naming the argument for wrong shapes, NaN/inf,
+      non-positive ``K``, ``max_steps`` or ``tol``.
 
     **Compile time:** ≈ 5 s on first use per bucketed batch size (MJX kinematics inside Newton's
     loop; benchmarks/compile_times.py).
@@ -188,7 +245,16 @@ def arm_equilibrium(arm: CogArm, q_set, K=None, *, max_steps: int = 12, tol: flo
 @renamed_keywords(n_iter="max_steps")
 def equilibrium(arm: CogArm, q_set, K=None, *, max_steps: int = 12, tol: float = 1e-10) -> ArmEquilibrium:
     """Deprecated alias of :func:`arm_equilibrium` (the name was easy to confuse with
-    :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium)."""
+    :func:`pmpjax.equilibrium_posture`, the λ0-PMP equilibrium).
+
+    **Arguments:**
+
+    - ``arm``, ``q_set``, ``K``, ``max_steps``, ``tol``: as :func:`arm_equilibrium`.
+
+    **Returns:**
+
+    An :class:`ArmEquilibrium`.
+    """
     warnings.warn(
         "pmpjax.equilibrium is deprecated; use pmpjax.arm_equilibrium (the springy arm under gravity)",
         DeprecationWarning,
@@ -215,11 +281,28 @@ def _equilibrium_batch(mx, site_id, q_set, K, max_steps, tol):
 
 
 def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
-    """Hand force field ``F`` (..., 3) [N] of set-point ``q_set`` (..., n) at postures ``q`` (..., n).
+    """Hand force field of a set-point at given postures (Williamson 1996, Figure 2).
 
     The spring torque ``τ = −K (q − θ_set)`` (minus ``∇V`` when ``gravity``) is expressed as a
     hand force by solving ``Jᵀ F = τ`` in least squares (the paper's ``J F = K (θ − θ_set)``,
     restoring sign), ``F = (J#)ᵀ τ`` with the Moore–Penrose ``J# = Jᵀ (J Jᵀ)⁻¹``.
+
+    **Arguments:**
+
+    - ``chain``: the arm's hand site as a :class:`MjcfChain` (``pj.MjcfChain(arm, "hand")``).
+    - ``q``: (..., n) postures [rad].
+    - ``q_set``: (..., n) set-point [rad].
+    - ``K``: (..., n) joint stiffness [Nm/rad], positive.
+    - ``gravity``: include the gravity torque ``−∇V``.
+
+    **Returns:**
+
+    (..., 3) hand forces ``F`` [N] (leading axes of the arguments broadcast).
+
+    **Raises:**
+
+    - ``TypeError`` for a non-``MjcfChain`` or a non-bool ``gravity``; ``ValueError`` naming the
+      argument for wrong shapes, NaN/inf, non-positive ``K`` or leading axes that do not broadcast.
     """
     if not isinstance(chain, MjcfChain):
         raise TypeError(f"`chain` must be a pmpjax.MjcfChain, got {type(chain).__name__}")
@@ -249,8 +332,16 @@ def force_field(chain: MjcfChain, q, q_set, K, *, gravity: bool = False):
 
 @pytree_dataclass
 class Moves:
-    """Set-point moves: start times ``t0`` (M,) [s], durations ``duration`` (M,) [s] (positive)
-    and displacements ``delta`` (M, n) [rad] (``θ_end − θ_start`` of each move)."""
+    """Set-point moves (Williamson 1996, Figure 4).
+
+    **Fields:**
+
+    - ``t0``: (M,) start times [s].
+    - ``duration``: (M,) durations [s], positive.
+    - ``delta``: (M, n) displacements ``θ_end − θ_start`` of each move [rad].
+
+    Construction raises ``ValueError`` naming the field for wrong shapes or non-positive durations.
+    """
 
     t0: jax.Array
     duration: jax.Array
@@ -271,9 +362,26 @@ class Moves:
 
 
 def moves_from_targets(start, targets, t0, duration) -> Moves:
-    """Moves from ``start`` (n,) through ``targets`` (M, n) issued at times ``t0`` (M,) with
-    durations ``duration`` (M,) [s] (scalars broadcast): each new move goes from the previous
-    *target* to the new one (not from where the arm is), as on Cog."""
+    """Moves from ``start`` through a sequence of targets.
+
+    Each new move goes from the previous *target* to the new one (not from where the arm is), as on
+    Cog.
+
+    **Arguments:**
+
+    - ``start``: (n,) the first set-point [rad].
+    - ``targets``: (M, n) set-point targets [rad].
+    - ``t0``: scalar or (M,) times at which the moves are issued [s].
+    - ``duration``: scalar or (M,) durations [s], positive.
+
+    **Returns:**
+
+    The :class:`Moves`.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, NaN/inf or non-positive durations.
+    """
     start = to_jax(as_array("start", start, tail=(None,)), float)
     if start.ndim != 1:
         raise ValueError(f"`start` must be one set-point (n,), got shape {start.shape}")
@@ -315,8 +423,23 @@ def _check_times(t):
 
 
 def move_velocity(moves: Moves, t):
-    """Summed set-point velocity (T, n) [rad/s] at times ``t`` (T,) of all ``moves``:
-    ``Σ_j Δ_j / d_j · (30 s⁴ − 60 s³ + 30 s²)``, ``s = (t − t0_j) / d_j``."""
+    """Summed set-point velocity of all moves at times ``t``.
+
+    ``Σ_j Δ_j / d_j · (30 s⁴ − 60 s³ + 30 s²)`` with ``s = (t − t0_j) / d_j`` (minimum jerk).
+
+    **Arguments:**
+
+    - ``moves``: the :class:`Moves`.
+    - ``t``: (T,) times [s].
+
+    **Returns:**
+
+    (T, n) set-point velocities [rad/s].
+
+    **Raises:**
+
+    - ``TypeError`` for a non-``Moves``; ``ValueError`` for non-positive durations or ``t`` not 1-D.
+    """
     _check_moves(moves)
     return _move_velocity(moves, _check_times(t))
 
@@ -328,10 +451,27 @@ def _move_velocity(moves, t):
 
 
 def summed_moves(moves: Moves, start, t):
-    """Set-points ``θ_set`` (T, n) [rad] and velocities (T, n) of summed moves from ``start`` (n,)
-    at times ``t`` (T,): the velocities are added and integrated exactly, so each move adds
-    ``Δ_j ξ(s_j)`` with ``ξ(s) = ∫₀ˢ 30 u²(1 − u)² du``; overlapping moves sum smoothly.
-    Differentiable in ``start``, ``moves.t0``, ``moves.duration``, ``moves.delta`` and ``t``."""
+    """Set-points and velocities of summed minimum-jerk moves (Williamson 1996, Figure 4).
+
+    The velocities are added and integrated exactly, so each move adds ``Δ_j ξ(s_j)`` with
+    ``ξ(s) = ∫₀ˢ 30 u²(1 − u)² du``; overlapping moves sum smoothly. Differentiable in ``start``,
+    ``moves.t0``, ``moves.duration``, ``moves.delta`` and ``t``.
+
+    **Arguments:**
+
+    - ``moves``: the :class:`Moves`.
+    - ``start``: (n,) the set-point before the first move [rad].
+    - ``t``: (T,) times [s].
+
+    **Returns:**
+
+    ``(θ_set, θ̇_set)``: (T, n) set-points [rad] and (T, n) their velocities [rad/s].
+
+    **Raises:**
+
+    - ``TypeError`` for a non-``Moves``; ``ValueError`` naming the argument for wrong shapes,
+      non-positive durations or ``t`` not 1-D.
+    """
     _check_moves(moves)
     n = moves.delta.shape[-1]
     start = as_array("start", start, tail=(n,))
