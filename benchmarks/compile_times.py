@@ -3,15 +3,16 @@ compiles, at the sizes of the main job's ``--quick`` parts.
 
 Each case runs in a fresh subprocess with JAX's persistent compilation cache off, calls the entry
 point twice on the same inputs and reports ``first − second`` as compile time (tracing, lowering,
-XLA compilation and one-off host work) and ``second`` as run time. Baseline in the same run: the
-issue's budget of 3 s per first call (the ratio column is budget / compile; ≥ 1 meets it).
+XLA compilation and one-off host work) and ``second`` as run time, against a budget of 3 s per
+first call (the last column).
 
 Usage: ``python benchmarks/compile_times.py [--only CASE ...] [--quick]`` (``--quick`` runs two
 cheap cases and writes nothing).
 
 Latest figures (2026-12-02 00:45–01:00 UTC, 2-core AMD EPYC Zen 4 KVM, no GPU, JAX 0.10.2,
 float64; load 1.5 at the start, ≈ 2.5 from ``equilibrium_posture`` on, when a test run shared the
-machine — so the later rows are inflated by up to ~1.5×)::
+machine — so the later rows are inflated by up to ~1.5×; the paired measurements below were
+taken after it, with the compile options they describe in place, and are lower)::
 
     case                     compile [s]   run [s]  within 3 s
     simulate                        6.06     0.018  no
@@ -29,78 +30,31 @@ machine — so the later rows are inflated by up to ~1.5×)::
     rollout_mujoco                  0.09     0.012  yes
 
 Only the C MuJoCo rollout meets the 3 s budget. What the compile time is: XLA's CPU compilation of
-graphs that hold the RK4 step (the chain, the redundancy solve and the planner, unrolled four
-times per step), forward-mode Jacobians of whole simulations (the fits) or MJX kinematics inside
-Newton's loop; run times are milliseconds to seconds. Each entry point's docstring states its cost.
-What users can do: the persistent compilation cache (the command line turns it on; a second run of
-the main job compiles nothing), and keeping shapes fixed (batch sizes are bucketed to powers of
-two, so similar sizes share a compile). Measured and rejected: a 4-stage-loop RK4 (compile 8.4 →
-4.7 s but 3.4× slower batched runs) and ``--xla_backend_optimization_level=0`` (no gain).
+graphs that hold the RK4 step (the chain, the redundancy solve and the planner), forward-mode
+Jacobians of whole simulations (the fits) or MJX kinematics inside Newton's loop; run times are
+milliseconds to seconds. Each entry point's docstring states its cost. What users can do: the
+persistent compilation cache (the command line turns it on; a second run of the main job compiles
+nothing), and keeping shapes fixed (batch sizes are bucketed to powers of two, so similar sizes
+share a compile).
 
-Run of 2026-12-02 (03:40–03:51 UTC, idle, load 1.4–1.7; A/B against the previous commit in
-alternating fresh processes): derivatives through ``simulate`` now take the JVP of a variant that
-loops over the four RK4 stages (the field appears once per step, not four times) and ``sincos``
-has a tangent rule instead of differentiating its polynomials. The ``fit_time_constants`` graph
-shrinks from 15.1 k to 9.1 k StableHLO ops (optimised HLO 35.9 k → 18.3 k lines, 555 → 348
-fusions) and its logged XLA compilation from 21.2 to 12.4 s in one paired run, but the
-end-to-end compile column does not resolve it: before 22.6, 22.8, 18.1 s, after 22.8, 22.4,
-21.4 s (tracing, ≈ 9 s, is unchanged; machine noise is ±25 %). ``grad_simulate`` 11.5 → 12.0 s,
-run times and B = 10 000 final-only ``simulate`` (1.0 s) unchanged within noise. The LM loop
-already traces the residual and its Jacobian once (``fitting._optimise``).
+How the library keeps compiles down, each measured in paired fresh processes:
 
-Run of 2026-12-02 (05:45–06:30 UTC, machine shared, load 5–7: CPU seconds of this process,
-``time.process_time``, of ``_fit_items.trace/lower/compile`` at the ``--quick`` pointing size,
-A/B in alternating fresh processes). ``least_squares`` now takes its Jacobians inside
-``pmpjax.internal.forward_jacobians``: ``simulate``'s JVP is a ``custom_vmap`` whose batching rule
-folds the tangent axis of ``jacfwd`` and the fit's ``vmap`` over items into the run's own batch, so
-the nested RK4 scans are traced once at the product batch instead of being batched to a fixed
-point per ``vmap`` level; and the residual is traced once (its jaxpr replayed in the loop, no
-``eval_shape``). ``fit_time_constants``: tracing 9.8 → 6.5 CPU s, XLA compile 27.2 → 21.5 CPU s,
-StableHLO 9.5 k → 7.3 k lines; run 1.0 → 1.3 CPU s (the primal is repeated per tangent: cheap for
-2 parameters). Same optimum to 1e-15. ``_profiles`` (the analysis of the model movements) is a
-third of that compile (20.1 s without it). ``--xla_backend_optimization_level=0``: compile 16.5 s
-but the run 18.7 s instead of 1.3 s; for ``simulate``'s kernel at B = 128, 250 steps: compile
-7.5 → 4.7 CPU s, run 0.02 → 0.43 s (``--xla_llvm_disable_expensive_passes``: no gain).
-``pointing --quick`` now fits Donders sessions of 300 postures (the full run's), so its NIO fit
-has ``donders_nio``'s compiled shapes: ``reproduce --quick --only donders_nio pointing --jobs 2``
-with a fresh cache, wall 225.5 → 186.4 s (pointing 207 → 171 s; load 5–6); alone
-(``--only pointing``, jobs 1, no cache) 112 → 116 s at load 4–5 (it then compiles the larger
-fit and a 1024-row equilibrium batch itself).
-
-Run of 2026-12-02 (11:55–13:25 UTC, idle, the machine ≈ 25 % slower after 12:15 than before,
-so compare within a pair only). XLA:CPU's MLIR fusion emitters (its default) against its legacy
-loop emitters (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=false``), whole table run back to back,
-compile / run [s]: equilibrium_posture 3.14 / 0.004 → 2.42 / 0.002, figure3_data 6.34 / 0.027 →
-5.43 / 0.018, fit_donders 17.38 / 1.99 → 12.74 / 2.02, estimate_ik_weights 3.14 / 0.54 → 2.28 /
-0.75, estimate_ik_weights_lm 5.11 / 2.80 → 3.93 / 1.15, pointing_pipeline 3.63 / 0.76 → 2.83 /
-0.74, fit_time_constants 14.54 / 1.31 → 13.72 / 0.62, arm_equilibrium 5.81 / 0.008 → 4.98 /
-0.009, rollout_mjx 14.07 / 0.117 → 10.70 / 0.029. The NIO fit's XLA compilation alone (6 subjects
-× 100 postures, 2 starts): 10.5 → 4.8 s, run 0.69 → 0.48 s. ``simulate``'s RK4 kernel gains
-nothing (Figure-3 size, three runs each: 3.2 vs 3.3 s) and runs 30 % slower at B = 10 000; the
-IK weights' Algorithm 1 runs 38 % slower. Hence ``pmpjax.fast_compile_jit`` (pmpjax/_base/compile.py):
-the option for the top-level calls of the fits, equilibria, MJX rollouts, sweeps and the RK4
-stability check, not for ``simulate``'s kernel or Algorithm 1. ``jax.grad`` through a rollout
-(tests/test_springy_rollout_gradient.py) wrapped in it: first call 64.9 → 49.9 s. Main job
-``reproduce --quick --no-cache``, A/B against the previous commit in alternating runs: 183 → 144 s
-and 181 → 163 s wall (339 → 267 and 337 → 301 s CPU). Also tried (NIO fit, compile / run):
-``--xla_backend_optimization_level=1`` 9.4 / 0.81 (no gain), ``=0`` 5.2 / 3.69 (5× slower runs),
-``--xla_llvm_disable_expensive_passes`` 9.4 / 0.55, ``--xla_cpu_max_isa=AVX2`` 8.8 / 0.62,
-``--xla_cpu_use_thunk_runtime=false`` 10.0 / 0.70, ``--xla_cpu_parallel_codegen_split_count=1``
-(simulate) no gain.
-
-Run of 2026-12-02 (15:55–16:00 UTC, idle; A/B against 6600550 in alternating fresh processes,
-two rounds, compile / run [s]): ``simulate`` below 1 025 movements now runs its RK4 stages in a
-loop and compiles top-level calls with the legacy emitters (eager calls skip its
-``custom_jvp``/``custom_vmap`` wrappers, under which JAX dropped the options): simulate 4.54, 3.42
-→ 3.13, 3.03 (run 0.017 → 0.008–0.010), simulate_final 4.06, 4.27 → 2.89, 2.45, figure3_data 5.76,
-5.34 → 4.35, 4.32. Every other library kernel now uses ``fast_compile_jit`` too: estimate_ik_weights
-(its input screening) 3.55, 3.20 → 2.32, 2.44 (run 0.64, 0.44 → 0.49, 0.31). pointing_pipeline
-3.94, 3.34 → 4.27, 3.55 and equilibrium_posture 2.35, 2.29 → 2.60, 2.20: unchanged within noise
-(the pipeline's first call now also imports SciPy's splines, moved out of ``import pmpjax``).
-Measured in the kernel alone (B = 8–10 000, every step saved, XLA compile / run):
-unrolled + defaults 2.9–3.7 s, stage loop + defaults 2.2–2.9 s, stage loop + legacy emitters
-1.7–1.9 s; runs at B = 1 000 0.20–0.22 → 0.24–0.27 s, at B = 10 000 1.8–2.0 → 2.1–2.3 s (so
-large batches keep the unrolled kernel); LLVM ``-O0`` on top (0.8 s) runs 2–10× slower.
+- ``pmpjax.fast_compile_jit`` (pmpjax/_base/compile.py) compiles the top-level calls of the fits,
+  equilibria, MJX rollouts, sweeps and the RK4 stability check with XLA:CPU's legacy loop emitters
+  instead of its MLIR fusion emitters: compile / run [s] equilibrium_posture 3.14 / 0.004 → 2.42 /
+  0.002, fit_donders 17.4 / 2.0 → 12.7 / 2.0, estimate_ik_weights_lm 5.1 / 2.8 → 3.9 / 1.2,
+  fit_time_constants 14.5 / 1.3 → 13.7 / 0.6, rollout_mjx 14.1 / 0.12 → 10.7 / 0.03; the main job
+  (``reproduce --quick --no-cache``) 183 → 144 s wall. Not for Algorithm 1 of the IK weights (38 %
+  slower runs) nor for ``simulate``'s kernel at large batches (30 % slower at B = 10 000).
+- ``simulate`` below 1 025 movements runs its RK4 stages in a loop with the legacy emitters (XLA
+  compile of the kernel 2.9–3.7 s unrolled, 1.7–1.9 s so; runs at B = 1 000 0.20–0.22 → 0.24–0.27
+  s), so larger batches keep the unrolled kernel; derivatives through ``simulate`` take the JVP of
+  the stage-loop variant, and the fits' Jacobians are traced once at the product batch of the
+  tangents and items (``pmpjax.internal.forward_jacobians``): ``fit_time_constants`` tracing 9.8 →
+  6.5 CPU s, XLA compile 27.2 → 21.5 CPU s, same optimum to 1e-15.
+- Rejected: ``--xla_backend_optimization_level=0`` (compile 16.5 s instead of 21.5 s but runs 5–15×
+  slower), ``=1``, ``--xla_llvm_disable_expensive_passes``, ``--xla_cpu_max_isa=AVX2``,
+  ``--xla_cpu_use_thunk_runtime=false``, ``--xla_cpu_parallel_codegen_split_count=1`` (no gain).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
