@@ -16,10 +16,10 @@ Compared in the same run (see ``_baselines.py``, which re-implements the field f
 JAX rows: ``compile`` = ``_run.lower(...).compile()`` of the jitted function behind ``simulate``
 (trace+lower reported separately); ``kernel`` = the compiled executable alone; ``call`` = the public
 ``pmpjax.simulate`` (input checks, RK4 stability check, ``block_until_ready``). The kernel is the
-one ``simulate`` runs at that batch size: since 2026-12-02 up to 1 024 movements a
-compile-light variant (RK4 stages in a loop, XLA's legacy emitters; ``_simulate._primal_run``), so
-the B = 1/100/1 000 rows below, measured before, show the unrolled kernel. Times are the
-minimum of several repeats (other engineers share the machine). Rates use the ``call`` time.
+one ``simulate`` runs at that batch size: up to 1 024 movements a compile-light variant (RK4 stages
+in a loop, XLA's legacy emitters; ``simulate_module._primal_run``), above it the unrolled one (the
+B = 1/100/1 000 rows of the table below were measured on the unrolled kernel). Times are the
+minimum of several repeats (the machine is shared). Rates use the ``call`` time.
 
 Peak memory, per batch size in a fresh subprocess: ``xla`` = argument + output + temp buffers of the
 compiled executable (``compiled.memory_analysis()``, exact); ``Δrss`` = growth of the resident set
@@ -62,70 +62,10 @@ Results (2026-11-22 10:20 UTC, quiet machine, 2-core AMD EPYC (Zen 4, KVM), no G
 Agreement of final postures with JAX (max |Δq| [rad]): scipy 1.1e-08, c 1.4e-16, numba 1.5e-16, 2-device 0.0e+00; closed-form vs generator-form Jacobian 1.1e-16.
 Ratios at B = 10000: JAX/SciPy trajectories/s = 125× (target ≥ 100×); JAX/C steps/s: 1 device 1.22, pinned 1 core 0.90, 2 devices 1.90 (target ≥ 0.5). Load average 2.1 → 1.6.
 
-Reading it: measured at 10:20 UTC with no other jobs on the machine (an earlier run at 08:45 under
-load 6–8 gave 134× SciPy and 0.61–1.3× C). At B = 10 000 one device runs 1.22× the C loop's
-steps/s (kernel 1.31×); pinned to one core 0.90×; split over the two cores 1.90×. SciPy does
-102 trajectories/s idle; JAX/SciPy = 125×. At B = 1 half of the 1.9 ms call is Python-side
-checks (kernel 1.0 ms). Saving every 10 steps costs 58 MB of XLA buffers instead of 6.5 MB.
-
-Save modes (``--saves``), 2026-12-02 03:58 UTC, quiet machine (load 1.4 → 1.6, this run's own
-two threads), with the C loop timed in the same interleaved rounds (``× C loop`` = C time / row
-time) and the same rows again in a child process with huge pages for large allocations:
-
-| default allocator (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × C loop | page faults |
-|---|---|---:|---:|---:|---:|---:|---:|---:|
-| final | final | 4.9 | 1049 ms | 2003 ms | 3.81 M | 1.00, 1.00 | 1.22 | 0 k |
-| every step | every step | 4.8 | 1534 ms | 2664 ms | 2.61 M | 1.46, 1.33 | 0.83 | 90 k |
-| every 10 | every 10 | 5.4 | 1086 ms | 2083 ms | 3.68 M | 1.03, 1.04 | 1.17 | 0 k |
-| ts (40) | ts (40) | 5.8 | 1166 ms | 2180 ms | 3.43 M | 1.11, 1.09 | 1.09 | 0 k |
-| loss, batched call (jit) | every step | 4.4 | 1087 ms | 2080 ms | 3.68 M | 1.04, 1.04 | 1.17 | 18 k |
-| loss, vmap of single calls (jit) | every step | 4.2 | 1257 ms | 2314 ms | 3.18 M | 1.20, 1.16 | 1.01 | 18 k |
-| C scalar loop, 1 core | final |  | 1275 ms | 1273 ms | 3.14 M | 1.22, 0.64 | 1.00 | 0 k |
-
-| huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1) (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × C loop | page faults |
-|---|---|---:|---:|---:|---:|---:|---:|---:|
-| final | final | 5.5 | 1057 ms | 1990 ms | 3.78 M | 1.00, 1.00 | 1.15 | 0 k |
-| every step | every step | 5.0 | 1432 ms | 2600 ms | 2.79 M | 1.35, 1.31 | 0.85 | 3 k |
-| every 10 | every 10 | 4.8 | 1043 ms | 1979 ms | 3.84 M | 0.99, 0.99 | 1.16 | 0 k |
-| ts (40) | ts (40) | 4.4 | 1038 ms | 1921 ms | 3.86 M | 0.98, 0.97 | 1.17 | 0 k |
-| loss, batched call (jit) | every step | 3.4 | 1094 ms | 2033 ms | 3.66 M | 1.03, 1.02 | 1.11 | 0 k |
-| loss, vmap of single calls (jit) | every step | 4.6 | 1119 ms | 2002 ms | 3.58 M | 1.06, 1.01 | 1.08 | 0 k |
-| C scalar loop, 1 core | final |  | 1211 ms | 1210 ms | 3.3 M | 1.15, 0.61 | 1.00 | 0 k |
-
-Reading it: every mode but saving every step is within 1.3× (most within 1.1×) of the final-only
-call and at or above the C loop in the same run (1.01–1.22×). Saving every step is 1.46× / 0.83× C
-with the default allocator and 1.35× / 0.85× C with huge pages: XLA's CPU buffers come from glibc
-``malloc``, so ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` (glibc ≥ 2.35, set before Python starts)
-takes the fresh 353 MB output from 90 k page faults to 3 k. What is left (≈ 0.6 s of CPU for
-353 MB) is the per-block transposed writes into the trajectory-major output, not the physics; the
-1.3× target for every-step saving is not met. The C loop ran at 3.1–3.3 M steps/s in this run
-(4.17 M on 2026-11-22 alone on the machine), so the ratios against it are the ones to read.
-
-Tried and rejected (A/B in separate processes, B = 10 000, idle, 2026-12-02 08:42 UTC, minimum
-of 6 interleaved rounds): writing the samples time-major ((M·S, comp, B) buffers, one transpose at
-the end) instead of trajectory-major blocks: every step 1049 ms → 1048 ms (× final 1.46 → 1.46;
-huge pages 1.34 → 1.33); so the transposed block writes are not the cost. Keeping freed memory
-in glibc's heap (``GLIBC_TUNABLES=glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4000000000``)
-halves the page faults (90 k → 47 k) and gives 1.37×, between the default and huge pages. Writing
-the end state inside the loop (the compiled HLO then has no whole-buffer copy after the loop):
-1096 → 1075 ms, noise. The saved observations are those of the RK4 field's first stage (no extra
-kinematics per sample). What is left is memory traffic XLA cannot avoid: its output buffers are
-fresh allocations, filled with zeros (the scan carry's initial value) and then written by the loop.
-A jitted fill of five zero buffers of this size alone takes 141 ms (page faults and one write
-pass), a third of the 350 ms gap to the final-only call. ``lax.empty`` lowers to zeros on the CPU,
-and XLA's uninitialised ``AllocateBuffer`` custom call has no CPU implementation (tried: "No
-registered implementation ... for Host"), so the zero fill stays.
-
-Where the every-step time goes (2026-12-04 04:40 UTC, idle, B = 10 000, minimum of 5 interleaved
-rounds, the kernel edited for each row and reverted; wall / CPU): final only 620–640 ms / 1.16–1.21 s;
-every step 905 ms / 1.56 s (1.42×). Computing and staging the saved observations without any
-output buffer: 740 ms (1.19×); the same plus materialising the 353 MB output (no writes in the
-loop): 815 ms (1.28×); plus the loop's block writes: 905 ms. So ≈ 120 ms is the observations
-(ẋ = J q̇, the manipulability and the block staging of 11 values × B per step), ≈ 75 ms the fresh
-output's allocation and fill, ≈ 90 ms the writes. The block size hardly matters (4, 16, 50
-samples: 908, 906, 944 ms) and neither do glibc's huge pages or heap reuse on this day
-(``hugetlb=1`` 1.58×, ``mmap_max=0`` 1.55×, both noisier). The 1.3× target would need the output
-fill gone, which XLA:CPU cannot skip (above): not met.
+Reading it: at B = 10 000 one device runs 1.22× the C loop's steps/s (kernel 1.31×); pinned to
+one core 0.90×; split over the two cores 1.90×. SciPy does 102 trajectories/s; JAX/SciPy = 125×.
+At B = 1 half of the 1.9 ms call is Python-side checks (kernel 1.0 ms). Saving every 10 steps
+costs 58 MB of XLA buffers instead of 6.5 MB.
 
 Save modes (``--saves --saves-repeats 9``), latest: 2026-12-04 19:00 UTC, idle (load 1.2 → 1.7),
 2-core AMD EPYC (Zen 4, KVM), jax 0.10.2. ``× final, paired`` = the median over the 9 rounds of the
@@ -143,114 +83,50 @@ the background load of this VM; the paired median by about ±0.05):
 | C scalar loop, 1 core | final |  | 934 ms | 934 ms | 4.28 M | 1.27, 0.67 | 1.22 | 1.00 | 0 k |
 
 With ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` in the same run: every step 1.79× / 1.85× paired
-(2 k page faults), the other rows 0.93–1.08×: huge pages did not help on this day.
+(2 k page faults), the other rows 0.93–1.08×: huge pages did not help in this run.
 
-Where the every-step time goes, by XLA's own CPU profiler (2026-12-04 18:10–19:10 UTC,
-``jax.profiler.trace(..., create_perfetto_trace=True)``, one call after warm-up, B = 10 000; the
-event durations summed per fused loop): the field's fused loops take the same ≈ 510–630 ms in both
-calls. On top of them the every-step call spends 166 ms in the block writes (five in-place
-``dynamic-update-slice`` loops per 16 samples, 1–2 ms each, run one after the other on one thread:
-XLA:CPU splits loop fusions over the cores but not in-place updates), 80–108 ms filling the fresh
-353 MB output (page faults: NumPy fills fresh memory of this size in 47–50 ms, copies at 26 GB/s),
-≈ 37 ms staging the samples of a block, and ≈ 60 ms in two fused loops per step that stacked the
-manipulability's Gram matrix ``J Jᵀ`` (now built from element lists and fused into the staging:
-16 823 instead of 17 625 field loops per call, as many as the final-only call; no wall-time change
-beyond the noise). Bounds, same method: the
-same kernel writing into a 28 MB ring instead of the 353 MB output runs at 1.13–1.29× the
-final-only call; the 400 one-step segments without any observation at 1.01–1.10×.
+Reading it: every mode but every-step saving is within 1.1× of the final-only call and at or above
+the C loop (1.23–1.33×); every-step saving is 1.43× the final-only call and 0.85× the C loop (the
+1.3× target is not met). Inside a caller's plain ``jax.jit`` above 16 movements ``simulate`` takes
+the unrolled kernel (a caller's ``pj.fast_compile_jit``, whose compile options apply, keeps the
+compile-light one), so a jitted loss runs as fast as the public call.
 
-Output layout: the initial fills of the five outputs are distinct constants (XLA merges equal fills
-and then copies them apart: whole-output copies) and the manipulability has its own (B, S) buffer
-(a reshaped view is copied after the loop): XLA's temporaries at B = 10 000 are 21 MB
-(``tests/test_simulate.py::test_every_step_saving_writes_in_place``).
+Where the every-step time goes, by XLA's own CPU profiler (``jax.profiler.trace(...,
+create_perfetto_trace=True)``, one call after warm-up, B = 10 000; the event durations summed per
+fused loop): the field's fused loops take the same ≈ 510–630 ms in both calls. On top of them the
+every-step call spends 166 ms in the block writes (five in-place ``dynamic-update-slice`` loops per
+16 samples, 1–2 ms each, run one after the other on one thread: XLA:CPU splits loop fusions over
+the cores but not in-place updates), 80–108 ms filling the fresh 353 MB output (page faults: NumPy
+fills fresh memory of this size in 47–50 ms), and ≈ 37 ms staging the samples of a block. Bounds,
+same method: the same kernel writing into a 28 MB ring instead of the 353 MB output runs at
+1.13–1.29× the final-only call; the 400 one-step segments without any observation at 1.01–1.10×.
+So the floor of every-step saving here is XLA:CPU's serial, page-faulting writes of a fresh 353 MB
+output, not the physics. XLA's output buffers are fresh allocations filled with the scan carry's
+initial value: ``lax.empty`` lowers to zeros on the CPU, and XLA's uninitialised
+``AllocateBuffer`` custom call has no CPU implementation, so the fill stays.
 
-Tried and rejected (2026-12-04, same process, variants imported side by side and interleaved,
-15–20 rounds, median of paired ratios, idle): writing the previous block while the next one
-integrates (the writes then depend on the carry only and XLA runs the five on both threads: write
-phases 166 → 135 ms wall; paired 1.35 vs 1.45 in one run, 1.40 vs 1.40 in the next: not kept);
-the same with double-buffered staging in the loop carry (1.42; the stacking adds fused loops);
-block-major sample buffers plus one assembling pass (contiguous block writes, 24 ms instead of
-~200 in the profile, but a second fresh 353 MB buffer: 1.40 vs 1.43–1.47, twice the peak memory);
-staging in the carry instead of per-block scan outputs (1.43 vs 1.45); one packed (11, B) staging
-write per step instead of five (1.56 vs 1.56); one sample per write, no staging (1.56 vs 1.53);
-two independent half-batch loops in one executable, hoping XLA runs them on the two cores (every
-step 1111 vs 875 ms, final 735 vs 618 ms); ``mallopt(M_MMAP_MAX=0, M_TRIM_THRESHOLD=1 GiB)`` at
-run time (1.42 vs 1.43: XLA's buffers come from worker threads' arenas, which fall back to
-``mmap``). So every mode but every-step saving is within 1.1× of the final-only call and at or
-above the C loop; every-step saving stays at 1.4× / 0.85× C: its floor here is XLA:CPU's serial,
-page-faulting writes of a fresh 353 MB output, not the physics.
+How the saving path is built (each measured in A/B runs): equal step sizes (every mode, equally
+spaced ``ts``) are compile-time constants, so the RK4 stages' fused loops do not read a per-segment
+step size (reading it made every fused loop 2.2× slower per element); samples are written in place
+into the (B, M·S, comp) outputs in blocks of 16 steps transposed at once (one fresh output, not
+four: 90 k page faults per call instead of 214 k); the saved ``q̇`` and ``x`` come from the RK4
+field's first stage of the next step, and only ``ẋ = J q̇`` and the manipulability (its Gram matrix
+built from element lists inside the staging) are added per sample; the five outputs' initial fills
+are distinct constants (XLA merges equal fills and then copies them apart) and the manipulability
+has its own (B, S) buffer, so XLA's temporaries at B = 10 000 are 21 MB
+(``tests/test_simulate.py::test_every_step_saving_writes_in_place``); a user's ``vmap`` is folded
+into the run's own trailing batch by a ``custom_vmap`` rule (equal results to the bit).
 
-Found on the way (``--saves --quick``, B = 1 000): inside a caller's ``jit`` the compile-light
-kernel (RK4 stages in a loop) lost its compile options and ran 2–3.5× slower than the unrolled one
-(jitted loss on the every-step trajectory 232 ms, 0.38× C); calls traced by a plain ``jax.jit``
-above 16 movements now take the unrolled kernel: 95 ms, 0.99× C (a caller's ``pj.fast_compile_jit``,
-whose options do apply, keeps the light one: ``simulate._primal_run``).
-
-Save modes (``--saves``), idle re-run 2026-12-02 01:22 UTC after the merge (load 0.5 → 1.4):
-
-| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
-|---|---|---:|---:|---:|---:|---:|---:|
-| final | final | 5.8 | 1065 ms | 2042 ms | 3.75 M | 1.00, 1.00 | 0 k |
-| every step | every step | 4.8 | 1560 ms | 2711 ms | 2.56 M | 1.46, 1.33 | 90 k |
-| every 10 | every 10 | 5.5 | 1138 ms | 2139 ms | 3.52 M | 1.07, 1.05 | 7 k |
-| ts (40) | ts (40) | 5.0 | 1319 ms | 2434 ms | 3.03 M | 1.24, 1.19 | 3 k |
-| loss, batched call (jit) | every step | 4.0 | 1191 ms | 2240 ms | 3.36 M | 1.12, 1.10 | 18 k |
-| loss, vmap of single calls (jit) | every step | 3.8 | 1136 ms | 2143 ms | 3.52 M | 1.07, 1.05 | 18 k |
-
-Every-step saving stays above the 1.3× target (1.46× wall, 1.33× CPU): the remainder is the first
-touch of the fresh 353 MB output (90 k page faults per call). Against the C loop's 4.17 M steps/s
-(table above), final-only runs at 0.90× and every-step at 0.61×: the ≥ 1.0× C target is not met
-in this run (the final-only kernel reached 1.22× on 2026-11-22; this run's final row includes the
-new per-block status bookkeeping).
-
-Save modes (``--saves``), 2026-12-02 00:33 UTC, same machine, heavily loaded (load average 9.1 →
-8.0 on 2 cores; absolute times ≈ 3× the quiet figures above, ratios are what to read):
-
-| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
-|---|---|---:|---:|---:|---:|---:|---:|
-| final | final | 15.6 | 3310 ms | 2589 ms | 1.21 M | 1.00, 1.00 | 0 k |
-| every step | every step | 12.9 | 5012 ms | 3372 ms | 798 k | 1.51, 1.30 | 90 k |
-| every 10 | every 10 | 14.9 | 2972 ms | 2518 ms | 1.35 M | 0.90, 0.97 | 0 k |
-| ts (40) | ts (40) | 15.7 | 3065 ms | 2510 ms | 1.3 M | 0.93, 0.97 | 0 k |
-| loss, batched call (jit) | every step | 10.5 | 3415 ms | 2540 ms | 1.17 M | 1.03, 0.98 | 18 k |
-| loss, vmap of single calls (jit) | every step | 12.1 | 3287 ms | 2629 ms | 1.22 M | 0.99, 1.02 | 18 k |
-
-Before (main at 08a433a, 2026-12-02 00:10 UTC, load 7.9 → 10.5, same script):
-
-| what (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | page faults |
-|---|---|---:|---:|---:|---:|---:|---:|
-| final | final | 15.2 | 3405 ms | 2267 ms | 1.17 M | 1.00, 1.00 | 0 k |
-| every step | every step | 14.8 | 9587 ms | 6823 ms | 417 k | 2.82, 3.01 | 214 k |
-| every 10 | every 10 | 12.7 | 3814 ms | 2497 ms | 1.05 M | 1.12, 1.10 | 0 k |
-| ts (40) | ts (40) | 11.0 | 3717 ms | 2542 ms | 1.08 M | 1.09, 1.12 | 0 k |
-| loss, batched call (jit) | every step | 9.6 | 6761 ms | 5108 ms | 592 k | 1.99, 2.25 | 32 k |
-| loss, vmap of single calls (jit) | every step | 12.6 | 7454 ms | 5251 ms | 537 k | 2.19, 2.32 | 32 k |
-
-Where the time went (XLA per-op traces with ``jax.profiler``, HLO dumps, ``getrusage``):
-
-1. *A step size read per segment.* Saving every step makes every step its own segment, whose step
-   size ``hs[i]`` is read at the loop index; XLA fused that read into the elementwise loops of
-   the RK4 stages (their HLO takes the loop index as an operand), and the same ~60 fusions per
-   step as the final-only loop ran 2.2× slower per element, at B = 100 as at 10 000 (so not
-   memory), even when saving only ``q``. This was most of the cost, also for the jitted loss
-   (2.0–2.3× with the saved arrays never leaving the computation). Fix: equal step sizes (every
-   mode, equally spaced ``ts``) are a compile-time constant; alone it took every-step saving from
-   2.3× to 1.26× the final-only CPU time in an A/B run.
-2. *Fresh memory.* Each new 353 MB array costs ≈ 86 k page faults, ≈ 0.45 s on this VM (a jitted
-   fill of fresh 353 MB: 0.45 s; a copy into touched memory: 0.07 s). The old path made four:
-   stacked (S, comp, B) scan outputs, the concatenated initial sample, the transpose to
-   (B, S, comp), and ``simulate``'s eager ``[..., 0, :, :]`` outside ``jit`` (214 k faults per
-   call). Fix: samples are written in place into the (B, M·S, comp) outputs (blocks of 16 steps
-   transposed at once, so that each write fills whole cache lines), the single-movement view is a
-   reshape inside ``jit``: one fresh output, 90 k faults. That output is the floor left in the
-   every-step row's wall time (1.51× wall, 1.30× CPU).
-3. *A fifth field evaluation per saved sample.* The saved ``q̇``, ``x`` come from RK4's first
-   stage of the next step (free); only ``ẋ = J q̇`` and the manipulability are added.
-4. *A user's ``vmap``.* Plain ``vmap`` put the mapped axis in front of the component-leading
-   state; a ``custom_vmap`` rule now folds it into the run's own trailing batch (equal results
-   to the bit, 0.99× the final-only call).
-
-First-call (compile) times are unchanged within the noise of the load (11–16 s here, 3–5 s quiet).
+Measured and rejected (B = 10 000, idle, interleaved rounds, median of paired ratios): writing the
+samples time-major with one transpose at the end (no change); writing the previous block while the
+next one integrates (1.35–1.40 vs 1.40–1.45, not resolved from the noise); double-buffered staging
+in the loop carry (1.42); block-major sample buffers plus one assembling pass (1.40 vs 1.43–1.47
+at twice the peak memory); one packed staging write per step instead of five (1.56 vs 1.56); one
+sample per write, no staging (1.56 vs 1.53); two independent half-batch loops in one executable
+(slower: every step 1111 vs 875 ms); keeping freed memory in glibc's heap
+(``GLIBC_TUNABLES=glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=4000000000``, or
+``mallopt`` at run time: XLA's buffers come from worker threads' arenas); writing the end state
+inside the loop (noise).
 """
 
 # ruff: noqa: E501  (the pasted result tables above)
