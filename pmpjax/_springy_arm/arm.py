@@ -55,7 +55,12 @@ BACKENDS = ("mjx", "mujoco")
 
 
 def arm_xml_path() -> str:
-    """Path of the shipped MJCF ``pmpjax/data/cog_arm.xml``."""
+    """Path of the shipped MJCF model of the Cog-like arm.
+
+    **Returns:**
+
+    The path of ``pmpjax/data/cog_arm.xml`` (str).
+    """
     return str(resources.files("pmpjax") / "data" / "cog_arm.xml")
 
 
@@ -71,13 +76,22 @@ class _Layout(NamedTuple):
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class CogArm:
-    """A loaded arm: ``mj_model`` (C MuJoCo, as loaded), ``mjx_model`` (MJX), ``c_model`` (the C
-    model with the springs as actuators, for ``backend="mujoco"``; ``None`` for arms loaded from
-    a compiled ``MjModel``), static indices, defaults.
+    """A loaded springy arm (made by :func:`load_arm`, not by hand).
 
-    ``n`` joints (6); ``dt`` [s] the MuJoCo timestep; ``K``, ``B`` (n,) default joint stiffness
-    [Nm/rad] and damping [Nm s/rad]; ``q_rest`` (n,) the rest posture [rad]; ``contacts`` whether
-    the probe–hand contacts (and touch forces) are simulated.
+    **Fields:**
+
+    - ``mj_model``: the C MuJoCo ``MjModel``, as loaded.
+    - ``mjx_model``: the MJX model.
+    - ``layout``: static indices of joints, sites, sensors and the probe.
+    - ``contacts``: whether the probe–hand contacts (and touch forces) are simulated.
+    - ``inertia_diag``: (n,) diagonal of the joint-space inertia at ``q_rest`` (for step-size checks).
+    - ``c_model``: the C model with the springs as actuators, for ``backend="mujoco"``; ``None`` for
+      arms loaded from a compiled ``MjModel``.
+    - ``K``, ``B``: (n,) default joint stiffness [Nm/rad] and damping [Nm s/rad].
+    - ``q_rest``: (n,) the rest posture [rad].
+    - ``n``: number of joints (6).
+
+    ``dt`` [s] is the MuJoCo timestep.
     """
 
     mj_model: Any
@@ -97,13 +111,25 @@ class CogArm:
 
 
 def load_arm(xml_or_model=None, *, contacts: bool = True) -> CogArm:
-    """Load the Cog-like arm (default: the shipped ``cog_arm.xml``) for MJX and C MuJoCo.
+    """Load the Cog-like arm for MJX and C MuJoCo.
 
-    ``xml_or_model``: path to an MJCF file, an MJCF string, or a ``mujoco.MjModel`` with the same
-    joint/site/sensor names (6 hinges, sites ``hand``/``palm``/``back``, touch sensors ``palm``
-    and ``back``, mocap body ``probe``). ``contacts=False`` disables contacts (needed for
-    ``jax.grad`` through rollouts). A compiled ``MjModel`` cannot be given actuators, so such an
-    arm runs on MJX only. The default model is cached.
+    **Arguments:**
+
+    - ``xml_or_model``: path to an MJCF file, an MJCF string, or a ``mujoco.MjModel`` with the same
+      joint/site/sensor names (6 hinges, sites ``hand``/``palm``/``back``, touch sensors ``palm``
+      and ``back``, mocap body ``probe``); default the shipped ``cog_arm.xml`` (cached). A compiled
+      ``MjModel`` cannot be given actuators, so such an arm runs on MJX only.
+    - ``contacts``: ``False`` disables contacts (needed for ``jax.grad`` through rollouts).
+
+    **Returns:**
+
+    A :class:`CogArm`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-bool ``contacts``; ``ValueError`` naming ``xml_or_model`` for a model
+      without the 6 hinge joints, the sites or sensors named above, a mocap ``probe``, or with
+      actuators of its own.
     """
     if not isinstance(contacts, bool):
         raise TypeError(f"`contacts` must be a bool, got {type(contacts).__name__}")
@@ -208,12 +234,21 @@ class ArmObs:
 
 @pytree_dataclass
 class ArmTrajectory:
-    """Rollout record at step start times ``t`` (T,) [s] (``t = k·dt``): ``q``, ``qdot``,
-    ``q_set`` (…, T, n) joint angles, velocities and the set-points commanded during the step;
-    ``tau`` (…, T, n) spring torque −K (q − θ_set) [Nm]; ``touch`` (…, T, 2) palm/back touch
-    [N]; ``hand`` (…, T, 3) hand site position [m]; ``q_final``, ``qdot_final`` (…, n) after
-    the last step; ``log`` the controller's per-step log (pytree, leaves (…, T, ·)). JAX arrays
-    from ``backend="mjx"``, NumPy arrays from ``backend="mujoco"``."""
+    """Rollout record of :func:`rollout` and :func:`run_controller`.
+
+    JAX arrays from ``backend="mjx"``, NumPy arrays from ``backend="mujoco"``.
+
+    **Fields:**
+
+    - ``t``: (T,) step start times ``k·dt`` [s].
+    - ``q``, ``qdot``: (…, T, n) joint angles [rad] and velocities [rad/s] at the step starts.
+    - ``q_set``: (…, T, n) the set-points commanded during each step [rad].
+    - ``tau``: (…, T, n) spring torque ``−K (q − θ_set)`` [Nm].
+    - ``touch``: (…, T, 2) palm and back touch [N].
+    - ``hand``: (…, T, 3) hand site position [m].
+    - ``q_final``, ``qdot_final``: (…, n) the state after the last step.
+    - ``log``: the controller's per-step log (pytree, leaves (…, T, ·)).
+    """
 
     t: jax.Array
     q: jax.Array
@@ -494,15 +529,33 @@ def run_controller(
 ) -> ArmTrajectory:
     """Closed-loop rollout of ``n_steps`` MuJoCo steps with ``controller`` in the loop.
 
-    ``controller`` is a pytree with ``init(q_set0)`` -> state and
-    ``step(state, obs: ArmObs, inp, K)`` -> (state, θ_set (n,), log pytree), shared by the whole batch
-    (its array leaves are parameters, not batched). ``ctrl_inputs``: pytree of per-step inputs with leaves
-    (*batch, n_steps, ...) (already broadcast to ``batch_shape``). ``probe`` (..., T, 3) [m]
-    mocap positions of the probe (default: parked out of reach); ``force`` (..., T, 3) [N]
-    external force on the hand's centre of mass. ``K``, ``B``, ``q0``, ``qdot0``, ``q_set0``
-    (..., n) default to the arm's. Leading axes broadcast to ``batch_shape``.
-    ``backend``: ``"mjx"`` (jit/vmap/grad) or ``"mujoco"`` (C ``mj_step`` per arm with the
-    jitted controller between steps; NumPy results, no gradients).
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm`.
+    - ``controller``: a pytree with ``init(q_set0)`` -> state and
+      ``step(state, obs: ArmObs, inp, K)`` -> (state, θ_set (n,), log pytree), shared by the whole
+      batch (its array leaves are parameters, not batched), e.g. :func:`reflex_network`.
+    - ``ctrl_inputs``: pytree of per-step inputs with leaves (*batch, n_steps, ...), already
+      broadcast to ``batch_shape``.
+    - ``n_steps``: MuJoCo steps.
+    - ``K``, ``B``: (..., n) joint stiffness [Nm/rad] and damping [Nm s/rad] (default the arm's).
+    - ``q0``, ``qdot0``, ``q_set0``: (..., n) initial posture [rad], velocity [rad/s] and set-point
+      [rad] (default the arm's rest, at rest).
+    - ``probe``: (..., T, 3) mocap positions of the probe [m] (default: parked out of reach).
+    - ``force``: (..., T, 3) external force on the hand's centre of mass [N].
+    - ``batch_shape``: the leading axes every argument broadcasts to.
+    - ``backend``: ``"mjx"`` (jit/vmap/grad) or ``"mujoco"`` (C ``mj_step`` per arm with the jitted
+      controller between steps; NumPy results, no gradients).
+
+    **Returns:**
+
+    An :class:`ArmTrajectory` with leaves (*batch_shape, n_steps, ·).
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm, or traced inputs with ``backend="mujoco"``; ``ValueError`` naming
+      the argument for wrong shapes, NaN/inf, gains too stiff for the timestep, negative damping,
+      an unknown ``backend`` or leading axes that do not broadcast.
     """
     check_arm(arm)
     _check_backend(backend, None)
@@ -577,17 +630,35 @@ def rollout(
     backend: str = "mjx",
     nthread: int | None = None,
 ) -> ArmTrajectory:
-    """Open-loop rollout: set-points ``q_set`` (..., T, n) [rad], one per MuJoCo step.
+    """Open-loop rollout: one set-point per MuJoCo step.
 
-    ``K``, ``B`` (..., n) joint stiffness/damping (default the arm's); ``q0``, ``qdot0`` (..., n)
-    initial state (default: ``q_set[..., 0, :]``, at rest); ``probe``/``force`` (..., T, 3) as in
-    :func:`run_controller`. Leading axes broadcast.
+    ``backend="mjx"`` (default): JAX arrays, differentiable with respect to ``q_set``, ``K``, ``B``,
+    ``q0``, ``qdot0`` (reverse mode on arms loaded with ``contacts=False``); compiles once per batch
+    size and ``T``. ``backend="mujoco"``: C MuJoCo's batch rollout on ``nthread`` threads, NumPy
+    arrays, no gradients, no compile; equal to MJX to rounding (contacts: to the solver tolerance).
 
-    ``backend="mjx"`` (default): JAX arrays, differentiable w.r.t. ``q_set``, ``K``, ``B``,
-    ``q0``, ``qdot0`` (reverse mode on arms loaded with ``contacts=False``); compiles once per
-    batch size and ``T`` (tens of seconds on a CPU). ``backend="mujoco"``: C MuJoCo's batch
-    rollout on ``nthread`` threads (default: all cores), NumPy arrays, no gradients, no compile;
-    equal to MJX to rounding (contacts: to the solver tolerance).
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm`.
+    - ``q_set``: (..., T, n) set-points [rad], one per step.
+    - ``K``, ``B``: (..., n) joint stiffness [Nm/rad] and damping [Nm s/rad] (default the arm's).
+    - ``q0``, ``qdot0``: (..., n) initial state (default ``q_set[..., 0, :]``, at rest).
+    - ``probe``, ``force``: (..., T, 3) as in :func:`run_controller`.
+    - ``backend``: ``"mjx"`` or ``"mujoco"``.
+    - ``nthread``: threads of the C backend (default: all cores).
+
+    Leading axes broadcast.
+
+    **Returns:**
+
+    An :class:`ArmTrajectory`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm, or traced inputs with ``backend="mujoco"``; ``ValueError`` naming
+      the argument for wrong shapes, no steps, NaN/inf, gains too stiff for the timestep, negative
+      damping, an unknown ``backend``, a non-positive ``nthread`` or leading axes that do not
+      broadcast.
 
     **Compile time** (``backend="mjx"``): ≈ 11 s for 4 × 200 steps of the 6-DoF arm on a 2-core CPU
     (``pj.fast_compile_jit``; benchmarks/compile_times.py); ``backend="mujoco"`` compiles nothing.
