@@ -45,10 +45,17 @@ IDLE_T0 = -2.0  # start of an idle slot's (empty, duration 1 s) move: it ended b
 
 @pytree_dataclass
 class ReflexInputs:
-    """Per-step inputs (…, T, ·): ``target`` (…, T, n) [rad] the target generator's current
-    target, ``new_target`` (…, T) 1 where a new target is issued, ``lead`` (…, T) 1 while the
-    hand is held, ``release`` (…, T) 1 to release grasp/withdrawal, ``touch`` (…, T, 2) [N]
-    scripted palm/back touch (combined with the measured contact forces by ``max``)."""
+    """Per-step inputs of the reflex network (made by :func:`script_inputs`).
+
+    **Fields:**
+
+    - ``target``: (…, T, n) the target generator's current target [rad].
+    - ``new_target``: (…, T) 1 where a new target is issued.
+    - ``lead``: (…, T) 1 while the hand is held.
+    - ``release``: (…, T) 1 to release grasp or withdrawal.
+    - ``touch``: (…, T, 2) scripted palm and back touch [N] (combined with the measured contact
+      forces by ``max``).
+    """
 
     target: jax.Array
     new_target: jax.Array
@@ -66,11 +73,27 @@ class ReflexInputs:
 
 
 def script_inputs(arm: CogArm, duration: float, *, targets=(), lead=(), release=(), touch=(), q_start=None):
-    """Build :class:`ReflexInputs` for ``duration`` [s] at the arm's ``dt``.
+    """Build the :class:`ReflexInputs` of a scripted run at the arm's timestep.
 
-    ``targets``: sequence of ``(time, q_target (n,))``; ``lead``: ``(t_on, t_off)`` intervals;
-    ``release``: times; ``touch``: ``(t_on, t_off, palm_N, back_N)`` scripted touches;
-    ``q_start`` (n,) the target before the first one (default the arm's rest posture).
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm`.
+    - ``duration``: length of the run [s] (at least one step).
+    - ``targets``: sequence of ``(time [s], q_target (n,) [rad])``.
+    - ``lead``: ``(t_on, t_off)`` intervals [s] during which the hand is held.
+    - ``release``: times [s] of releases.
+    - ``touch``: ``(t_on, t_off, palm_N, back_N)`` scripted touches (times [s], forces [N] ≥ 0).
+    - ``q_start``: (n,) the target before the first one [rad] (default the arm's rest posture).
+
+    **Returns:**
+
+    The :class:`ReflexInputs` with leaves (T, ·), ``T = duration / dt`` steps.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm; ``ValueError`` naming the argument for a non-positive or too
+      short ``duration``, wrong shapes, times outside ``[0, duration)``, intervals with
+      ``t_off <= t_on`` or negative forces.
     """
     check_arm(arm)
     check_positive("duration", duration)
@@ -142,13 +165,22 @@ class ReflexState:
 
 @pytree_dataclass
 class ReflexNetwork:
-    """Parameters of the reflex network (all times [s]): ``rest`` (n,) rest primitive [rad];
-    ``reach_duration``, ``withdraw_duration`` move durations; ``touch_threshold`` [N];
-    ``lead_threshold`` (n,) or scalar [Nm]; ``lead_refresh`` [s]; ``grasp_damping`` (n,) or
-    scalar [Nm s/rad] extra joint damping while grasping (0 = none; :func:`reflex_network` uses
-    the arm's ``B``, doubling it); ``dt`` (static) the control period = the arm's MuJoCo step;
-    ``slots`` (static) concurrent moves. (The grasp no longer adds a timed move, so the former
-    ``grasp_duration`` is gone.)
+    """Parameters of the reflex network (Williamson 1996, Figures 8–10), all times in seconds.
+
+    Made by :func:`reflex_network`; construction checks every field and raises ``ValueError`` naming
+    it for non-positive durations or thresholds, negative ``grasp_damping`` or a bad ``slots``.
+
+    **Fields:**
+
+    - ``rest``: (n,) rest primitive [rad].
+    - ``reach_duration``, ``withdraw_duration``: move durations [s].
+    - ``touch_threshold``: touch that triggers grasp or withdrawal [N].
+    - ``lead_threshold``: (n,) or scalar joint torque that triggers lead [Nm].
+    - ``lead_refresh``: period of the lead reflex's new targets [s].
+    - ``grasp_damping``: (n,) or scalar extra joint damping while grasping [Nm s/rad] (0 = none;
+      :func:`reflex_network` uses the arm's ``B``, doubling it).
+    - ``dt``: (static) the control period, the arm's MuJoCo step [s].
+    - ``slots``: (static) concurrent moves.
     """
 
     rest: jax.Array
@@ -260,8 +292,22 @@ class ReflexNetwork:
 
 
 def reflex_network(arm: CogArm, **params) -> ReflexNetwork:
-    """A :class:`ReflexNetwork` for ``arm``: rest primitive, ``grasp_damping`` (= the arm's
-    joint damping ``B``, doubling it while grasping) and ``dt`` from the arm; ``params`` override."""
+    """The reflex network of an arm, with its defaults.
+
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm`; the rest primitive, ``grasp_damping`` (= the arm's joint damping
+      ``B``, doubling it while grasping) and ``dt`` come from it.
+    - ``params``: fields of :class:`ReflexNetwork` to override (not ``dt``).
+
+    **Returns:**
+
+    A :class:`ReflexNetwork`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm; ``ValueError`` for ``dt`` among ``params`` or a bad field value.
+    """
     check_arm(arm)
     if "dt" in params:
         raise ValueError("`dt` comes from the arm (its MuJoCo timestep); do not pass it")
@@ -282,13 +328,29 @@ def run_reflexes(
     q0=None,
     backend: str = "mjx",
 ) -> ArmTrajectory:
-    """Closed-loop rollout of the reflex network on the arm.
+    """Closed-loop rollout of the reflex network on the arm (Williamson 1996, Figures 8–10).
 
-    ``inputs`` (:class:`ReflexInputs`, leaves (…, T, ·)) drive the target generator and the
-    scripted sensors; ``probe`` (…, T, 3) moves the contact probe (touch from MuJoCo contacts);
-    ``force`` (…, T, 3) [N] pushes the hand (for lead). ``backend``: ``"mjx"`` or ``"mujoco"``
-    (C MuJoCo, see :func:`pmpjax.run_controller`). Returns an :class:`ArmTrajectory` whose
-    ``log`` holds ``mode`` (…, T) and ``tau_ref`` (…, T, n).
+    **Arguments:**
+
+    - ``arm``: a :class:`CogArm`.
+    - ``network``: the :class:`ReflexNetwork` (:func:`reflex_network`).
+    - ``inputs``: :class:`ReflexInputs` with leaves (…, T, ·): they drive the target generator and
+      the scripted sensors.
+    - ``probe``: (…, T, 3) positions of the contact probe [m] (touch from MuJoCo contacts).
+    - ``force``: (…, T, 3) force pushing the hand [N] (for lead).
+    - ``K``, ``B``: (…, n) joint stiffness [Nm/rad] and damping [Nm s/rad] (default the arm's).
+    - ``q0``: (…, n) initial posture [rad] (default the arm's rest).
+    - ``backend``: ``"mjx"`` or ``"mujoco"`` (C MuJoCo, see :func:`pmpjax.run_controller`).
+
+    **Returns:**
+
+    An :class:`ArmTrajectory` whose ``log`` holds ``mode`` (…, T) and ``tau_ref`` (…, T, n).
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm, non-network or non-inputs; ``ValueError`` naming the argument for
+      a network made for another timestep, wrong shapes, leading axes that do not broadcast, or
+      grasp damping too large for the explicit damping step.
     """
     check_arm(arm)
     if not isinstance(network, ReflexNetwork):
@@ -341,7 +403,20 @@ def run_reflexes(
 
 
 def stack_inputs(inputs) -> ReflexInputs:
-    """Stack a list of :class:`ReflexInputs` (same T) along a new leading batch axis."""
+    """Stack :class:`ReflexInputs` of the same length along a new leading batch axis.
+
+    **Arguments:**
+
+    - ``inputs``: a non-empty sequence of :class:`ReflexInputs` (same T and n).
+
+    **Returns:**
+
+    The :class:`ReflexInputs` with leaves (B, T, ·).
+
+    **Raises:**
+
+    - ``TypeError`` for an empty or non-``ReflexInputs`` sequence; ``ValueError`` for unequal shapes.
+    """
     inputs = list(inputs)
     if not inputs or not all(isinstance(i, ReflexInputs) for i in inputs):
         raise TypeError("`inputs` must be a non-empty sequence of ReflexInputs")
