@@ -42,7 +42,7 @@ to a singular posture that Radau does not finish). ``× first row``: run time ov
 first (fixed-step) row.
 
 **3. Overhead of the estimate on the fixed-step path** (``overhead --base DIR``, DIR a work tree of
-the code before the estimate: ``git worktree add /tmp/pmpjax-base fb0fd1b``). One worker process
+the code without the error estimate, made with ``git worktree add``). One worker process
 per tree (PYTHONPATH puts the tree first; the worker reports ``pmpjax.__file__`` and the run stops if
 it is not that tree's) runs benchmarks/simulate.py's foundation rows — Figure 3 wrist, RK4 1 ms,
 the public ``simulate`` call and the AOT-compiled kernel alone (its ``bench_jax``), final state at
@@ -135,7 +135,7 @@ Adaptive against fixed steps::
     | Figure 3 wrist (simulate.py), final | 1000 | rk4 adaptive | 43, 45 | 1.8e-04 | 1.8e-04 | 0/12 | 1000 OK | 4.7 | 0.024 | 0.024 | 0.14 |
     | Figure 3 wrist (simulate.py), final | 1000 | rodas4 adaptive | 30, 31 | 6.8e-06 | 6.8e-06 | 0/12 | 1000 OK | 6.3 | 0.038 | 0.038 | 0.22 |
 
-Overhead of the estimate (new: the work tree with the estimate; base: fb0fd1b, before it; 14
+Overhead of the estimate (new: the work tree with the estimate; base: a work tree without it; 14
 rounds, 23:36–23:40 UTC, load 2.9–4.4)::
 
     | row (Figure 3 wrist, RK4 1 ms) | base [ms] | new [ms] | new / base, wall | new / base, CPU |
@@ -146,10 +146,6 @@ rounds, 23:36–23:40 UTC, load 2.9–4.4)::
     | final, kernel alone, B = 10000 | 1304 | 1356 | 1.061 (1.02–1.13) | 1.055 (1.02–1.13) |
     | every step, public call, B = 10000 | 1699 | 1790 | 1.083 (1.04–1.11) | 1.066 (1.02–1.09) |
     | every step, kernel alone, B = 10000 | 1711 | 1833 | 1.052 (1.02–1.08) | 1.054 (1.04–1.08) |
-
-    Four earlier runs the same evening (load 2.7–6.2; 12–20 rounds), new / base wall: final at
-    B = 10 000 1.05, 1.08, 1.06, 1.08 (public call) and 1.05, 1.02, 1.10, 1.07 (kernel); every step
-    1.08, 1.13, 1.19, 1.09 (public call), 1.08, 1.07 (kernel); B = 1 000 0.96–1.09.
 
 What the figures say:
 
@@ -971,7 +967,7 @@ if __name__ == "__main__":
                     help="run these problems (estimate: figure3 ... stiffening; adaptive: arm64, arm256, figure3) "
                     "only; the others' rows are kept from the JSON")
     ap.add_argument("--base", help="overhead: a work tree of the code to compare with (e.g. `git worktree add "
-                    "/tmp/pmpjax-base fb0fd1b`, the commit before the estimate)")
+                    "/tmp/pmpjax-base <commit>` of a commit without the error estimate)")
     ap.add_argument("--rounds", type=int, default=12, help="overhead: interleaved rounds (default 12)")
     ap.add_argument("--overhead-server", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
