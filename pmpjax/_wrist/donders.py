@@ -1,4 +1,4 @@
-"""Donders surfaces (design §3.4): torsion as a quadratic of the pointing components.
+"""Donders surfaces: torsion as a quadratic of the pointing components.
 
 Orientations are rotation vectors ``r = (r_x, r_y, r_z)`` [rad] (axis·angle, see
 ``_orientation``); the surface is
@@ -6,7 +6,7 @@ Orientations are rotation vectors ``r = (r_x, r_y, r_z)`` [rad] (axis·angle, se
     r_x = c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²,
 
 fitted by linear least squares (QR). Its *thickness* is the RMS torsion residual [rad]. The
-model's surface comes from the equilibrium postures (§3.1) of ``(KJ, q_rest)`` over a grid of
+model's surface comes from the equilibrium postures of ``(KJ, q_rest)`` over a grid of
 pointing targets.
 """
 
@@ -31,9 +31,17 @@ SCREEN_HALF_ANGLE_DEG = 20.0  # the pointing area of the Donders experiments: ±
 
 @pytree_dataclass
 class DondersSurface:
-    """``coef`` (..., 6) ``c0..c5`` [rad, 1, 1, 1/rad, 1/rad, 1/rad]; ``stderr`` (..., 6) their
-    standard errors (``σ² (AᵀA)⁻¹``, ``σ² = SSR / (N − 6)``); ``thickness`` (...,) RMS residual
-    [rad]; ``n`` (...,) number of samples used."""
+    """A Donders surface ``r_x = c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²``.
+
+    Made by :func:`fit_donders_surface` and :func:`model_donders_surface`.
+
+    **Fields:**
+
+    - ``coef``: (..., 6) ``c0..c5`` [rad, 1, 1, 1/rad, 1/rad, 1/rad].
+    - ``stderr``: (..., 6) their standard errors (``σ² (AᵀA)⁻¹``, ``σ² = SSR / (N − 6)``).
+    - ``thickness``: (...,) RMS torsion residual [rad].
+    - ``n``: (...,) number of samples used.
+    """
 
     coef: jax.Array
     stderr: jax.Array
@@ -50,8 +58,21 @@ def _design(r_y, r_z):
 
 
 def evaluate_surface(coef, r_y, r_z):
-    """``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²`` [rad]; ``coef`` (..., 6), ``r_y``,
-    ``r_z`` [rad] broadcast against ``coef[..., 0]``."""
+    """Torsion ``c0 + c1 r_y + c2 r_z + c3 r_y² + c4 r_y r_z + c5 r_z²`` of a Donders surface.
+
+    **Arguments:**
+
+    - ``coef``: (..., 6) coefficients (``DondersSurface.coef``).
+    - ``r_y``, ``r_z``: rotation-vector components [rad], broadcast against ``coef[..., 0]``.
+
+    **Returns:**
+
+    The torsion ``r_x`` [rad], of the broadcast shape.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong trailing shape or NaN/inf.
+    """
     coef = to_jax(as_array("coef", coef, tail=(6,)))
     r_y = to_jax(as_array("r_y", r_y), coef.dtype)
     r_z = to_jax(as_array("r_z", r_z), coef.dtype)
@@ -66,9 +87,22 @@ def _evaluate(coef, r_y, r_z):
 
 
 def surface_grid(surface_or_coef, *, extent: float = np.deg2rad(20.0), n: int = 21):
-    """Surface on an ``n × n`` grid of ``(r_y, r_z) ∈ [−extent, extent]²`` [rad].
+    """A Donders surface on an ``n × n`` grid of ``(r_y, r_z) ∈ [−extent, extent]²``.
 
-    Returns ``(r_y (n, n), r_z (n, n), r_x (..., n, n))``."""
+    **Arguments:**
+
+    - ``surface_or_coef``: a :class:`DondersSurface` or (..., 6) coefficients.
+    - ``extent``: half-width of the grid [rad] (default 20°).
+    - ``n``: grid points per axis.
+
+    **Returns:**
+
+    ``(r_y, r_z, r_x)``: (n, n), (n, n) and (..., n, n) [rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a non-positive ``extent`` or ``n``, or bad coefficients.
+    """
     coef = surface_or_coef.coef if isinstance(surface_or_coef, DondersSurface) else surface_or_coef
     coef = to_jax(as_array("surface_or_coef", coef, tail=(6,)))
     check_positive("extent", extent)
@@ -101,10 +135,22 @@ def _fit(r, w):
 
 
 def fit_donders_surface(r, mask=None) -> DondersSurface:
-    """Least-squares Donders surface of rotation vectors ``r`` (..., N, 3) [rad].
+    """Least-squares Donders surface of rotation vectors (QR).
 
-    ``mask`` (..., N) bool selects samples (ragged subjects); leading axes are fitted
-    independently. Raises ``ValueError`` for NaN/inf, wrong shapes, or fewer than 7 samples.
+    Leading axes are fitted independently.
+
+    **Arguments:**
+
+    - ``r``: (..., N, 3) rotation vectors ``(r_x, r_y, r_z)`` [rad] (:func:`rotvec_from_quat`).
+    - ``mask``: optional (..., N) bool selecting samples (ragged subjects).
+
+    **Returns:**
+
+    A :class:`DondersSurface` with leading axes ``(...)``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for NaN/inf, wrong shapes, or fewer than 7 samples.
     """
     r = as_array("r", r, tail=(None, 3))
     r = jnp.asarray(r, jnp.result_type(float))
@@ -122,8 +168,23 @@ def fit_donders_surface(r, mask=None) -> DondersSurface:
 
 
 def screen_grid(n: int = 9, *, half_angle_deg: float = SCREEN_HALF_ANGLE_DEG, d: float = 1.0):
-    """``n × n`` pointing targets (n², 2) [m] covering the ±``half_angle_deg`` screen area
-    (``|x_i| ≤ d sin(half_angle)``, Eq 6 at distance ``d``)."""
+    """A grid of pointing targets covering the screen area of the Donders experiments.
+
+    **Arguments:**
+
+    - ``n``: targets per axis.
+    - ``half_angle_deg``: the area's half-angle [deg], in (0, 90): ``|x_i| ≤ d sin(half_angle)``.
+    - ``d``: screen distance [m] (Eq 6).
+
+    **Returns:**
+
+    (n², 2) screen points [m].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a non-positive ``n`` or ``d``, or a half-angle outside
+      (0, 90).
+    """
     n = check_positive_int("n", n)
     check_positive("d", d)
     if not (np.isfinite(half_angle_deg) and 0 < half_angle_deg < 90):
@@ -134,11 +195,27 @@ def screen_grid(n: int = 9, *, half_angle_deg: float = SCREEN_HALF_ANGLE_DEG, d:
 
 
 def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = None):
-    """The model's Donders surface: equilibria (§3.1) of ``(KJ (..., 3, 3), q_rest (..., 3))``
-    at ``pointing`` (P, 2) targets (default a 9 × 9 grid over ±20°), their rotation vectors, and
-    the surface fitted to them.
+    """The λ0-PMP's Donders surface: its equilibrium postures over a grid of pointing targets.
 
-    Returns ``(surface, r (..., P, 3), q (..., P, 3))``. Differentiable in ``KJ``, ``q_rest``.
+    The equilibria (:func:`equilibrium_posture`) of ``(KJ, q_rest)`` at ``pointing``, their rotation
+    vectors, and the surface fitted to them. Differentiable in ``KJ`` and ``q_rest``.
+
+    **Arguments:**
+
+    - ``KJ``: (..., 3, 3) SPD joint stiffness [Nm/rad].
+    - ``q_rest``: (..., 3) rest posture [rad].
+    - ``pointing``: (P, 2) screen targets [m] (default a 9 × 9 grid over ±20°, :func:`screen_grid`).
+    - ``chain``: the :class:`Wrist` (default ``Wrist(d=1.0)``).
+
+    **Returns:**
+
+    ``(surface, r, q)``: the :class:`DondersSurface`, (..., P, 3) rotation vectors [rad] and
+    (..., P, 3) postures [rad].
+
+    **Raises:**
+
+    - ``TypeError`` for a chain that is not a ``Wrist``; ``ValueError`` naming the argument for wrong
+      shapes, non-SPD ``KJ`` or unreachable ``pointing``.
     """
     chain = Wrist() if chain is None else chain
     if not isinstance(chain, Wrist):
@@ -156,10 +233,22 @@ def model_donders_surface(KJ, q_rest, pointing=None, *, chain: Wrist | None = No
 
 
 def plot_donders(r=None, surfaces=(), *, labels=None, ax=None, extent=np.deg2rad(20.0), n=15):
-    """3-D plot of rotation-vector samples ``r`` (N, 3) and Donders surfaces (degrees on all axes).
+    """3-D plot of rotation-vector samples and Donders surfaces (degrees on all axes).
 
-    ``surfaces`` is a sequence of :class:`DondersSurface` or coefficient vectors (6,). Axes:
-    ``r_y`` and ``r_z`` horizontal, torsion ``r_x`` vertical. Returns the matplotlib ``Axes``.
+    Axes: ``r_y`` and ``r_z`` horizontal, torsion ``r_x`` vertical.
+
+    **Arguments:**
+
+    - ``r``: optional (N, 3) rotation vectors [rad] drawn as points.
+    - ``surfaces``: a sequence of :class:`DondersSurface` or (6,) coefficient vectors.
+    - ``labels``: legend labels, one per surface.
+    - ``ax``: a matplotlib 3-D ``Axes`` to draw into (default a new figure).
+    - ``extent``: half-width of the drawn surfaces [rad].
+    - ``n``: grid points per axis of each surface.
+
+    **Returns:**
+
+    The matplotlib ``Axes``.
     """
     import matplotlib.pyplot as plt
 
