@@ -67,7 +67,7 @@ reprints a results file's tables. Writes ``results/movements.json``. The full ru
 2–5, 19 of them the S = 64 row (its run is linear in S, below).
 
 Latest figures: 2026-12-06 03:15–03:49 UTC, 2-core AMD EPYC (KVM), no GPU, jax/jaxlib 0.10.2,
-MuJoCo 4.0.1, float64, library at 80e8be9; 33.5 min in all, load average 2.2 at the start and 4.1
+MuJoCo 4.0.1, float64; 33.5 min in all, load average 2.2 at the start and 4.1
 at the end (other work shared the machine; per part below).
 
 Cold fit + predict, 4 subjects × 20 reaches, 10 held out each (load 1.9 → 2.8)::

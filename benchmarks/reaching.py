@@ -45,8 +45,7 @@ nothing. Usage: ``python benchmarks/reaching.py [--quick] [--subjects 1 ...] [--
 [--scipy-nfev 3] [--max-steps 100 100] [--table [--variants ...] [--name NAME]]``; the fit cost
 writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
-Latest figures (2026-12-05, 2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64; library
-at 5e331bd).
+Latest figures (2026-12-05, 2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
 
 Fit cost (the run of 00:39–00:43 UTC on the 6th; load average 0.6 at the start, 2.0 with the
 benchmark itself at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
@@ -72,9 +71,8 @@ benchmark itself at the end; defaults: ``max_steps=(100, 100)``, fitted time con
     threads (XLA's CPU client, one device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads
     but 3×4 products and 3×3 solves stay on the calling thread; ``OPENBLAS_NUM_THREADS=1`` does
     not change the baseline's time. The JAX side's run time varies with the machine's other work
-    far more than the SciPy loop's: over four full runs that night (00:09–00:43 UTC; the first
-    three with the library at 39fb886) S01 alone took 10.9–16.6 s and a residual call 0.61–0.66
-    s: 14–21×.
+    far more than the SciPy loop's (S01 alone took 10.9–16.6 s over four full runs within the hour
+    before, a residual call 0.61–0.66 s: 14–21×).
 
 Held-out table (2026-12-05 16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12
 variants + the Donders-only model; ``results/reaching_table.md``): every fit of every variant
