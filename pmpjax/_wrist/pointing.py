@@ -71,12 +71,23 @@ _UNIT_TOL = 1e-3
 class PointingRecording:
     """IMU samples of a center-out pointing experiment, one entry per sample (N rows).
 
-    ``subject`` (N,) str; ``trial`` (N,) int; ``time`` (N,) [s] from the trial's start; ``quat``
-    (N, 4) unit hand orientation ``(w, x, y, z)``; ``target`` (N,) str, the target on screen;
-    ``d`` screen distance [m]; ``radius`` nominal target distance [m] (normalises curvature);
-    ``source`` the file it was read from (named in messages); ``line`` (N,) the file line of
-    each row (None when built in memory: messages then give the row index); ``skipped`` the
-    trials the reader dropped, as ``(subject, trial, reason)``.
+    Made by :func:`read_pointing` or :func:`synthetic_pointing_experiment`; construction checks the
+    shapes and raises ``ValueError`` naming the source and the field.
+
+    **Fields:**
+
+    - ``subject``: (N,) str subject names.
+    - ``trial``: (N,) int trial numbers.
+    - ``time``: (N,) time from the trial's start [s].
+    - ``quat``: (N, 4) unit hand-to-world orientation ``(w, x, y, z)``, scalar first, in the frame of
+      Eq 6.
+    - ``target``: (N,) str, the target on screen (``C``, ``N``, ``NE``, … ``NW``).
+    - ``d``: screen distance [m].
+    - ``radius``: nominal target distance [m] (normalises curvature).
+    - ``source``: the file it was read from (named in messages).
+    - ``line``: (N,) the file line of each row (None when built in memory: messages then give the
+      row index).
+    - ``skipped``: the trials the reader dropped, as ``(subject, trial, reason)``.
     """
 
     subject: np.ndarray
@@ -232,7 +243,18 @@ def drop_trials(rec: PointingRecording, problems, *, warn: bool = True) -> Point
 
 
 def write_pointing(path, rec: PointingRecording) -> None:
-    """Write ``rec`` to ``path`` (``.csv`` or ``.npz``; see the module docstring)."""
+    """Write a pointing recording as CSV or NPZ (the format :func:`read_pointing` reads).
+
+    **Arguments:**
+
+    - ``path``: the file; ``.csv`` (``subject,trial,time,qw,qx,qy,qz,target`` with ``# d=`` and
+      ``# radius=`` lines) or ``.npz``.
+    - ``rec``: the :class:`PointingRecording`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-recording; ``ValueError`` naming ``path`` for another suffix.
+    """
     path = os.fspath(path)
     if not isinstance(rec, PointingRecording):
         raise TypeError(f"`rec` must be a PointingRecording, got {type(rec).__name__}")
@@ -254,11 +276,27 @@ def write_pointing(path, rec: PointingRecording) -> None:
 
 
 def read_pointing(path, *, on_invalid: str = "raise") -> PointingRecording:
-    """Read a pointing recording (``.csv`` or ``.npz``; module docstring) strictly.
+    """Read a pointing recording (``.csv`` or ``.npz``, the format of the module docstring) strictly.
 
-    ``on_invalid``: "raise" (default) raises ``ValueError`` for invalid trial data, naming file,
-    line, column, subject and trial; "skip" drops such trials (warning) and lists them in
-    ``recording.skipped``. Structural problems always raise.
+    CSV columns ``subject,trial,time,qw,qx,qy,qz,target``, one row per IMU sample; lines
+    ``# d=<metres>`` and ``# radius=<metres>`` give the screen distance and the target radius.
+
+    **Arguments:**
+
+    - ``path``: the file.
+    - ``on_invalid``: ``"raise"`` (default) raises for invalid trial data, naming file, line, column,
+      subject and trial; ``"skip"`` drops such trials (warning) and lists them in
+      ``recording.skipped``. Structural problems always raise.
+
+    **Returns:**
+
+    A :class:`PointingRecording`.
+
+    **Raises:**
+
+    - ``ValueError`` naming the file, line and column: another suffix, a missing, duplicate or
+      unknown column, wrong field counts, non-numeric fields, non-integer trials, empty subject
+      names, and (with ``on_invalid="raise"``) invalid trial data; an unknown ``on_invalid``.
     """
     path = os.fspath(path)
     if on_invalid not in ("raise", "skip"):
@@ -384,16 +422,21 @@ def _read_csv(path):
 
 @dataclasses.dataclass(frozen=True)
 class SyntheticPointing:
-    """A synthetic experiment: ``recording`` (:class:`PointingRecording`), ``donders``
-    (:class:`DondersRecording`, one Donders session per subject), ``files`` (paths written, by
-    kind: "pointing", "donders"; empty without ``out``) and ``truth``, a dict of the generating
-    values: ``subjects``, ``KJ`` (S, 3, 3), ``q_rest`` (S, 3), ``labels`` (16,), ``T`` (S, 16)
-    mean durations T_sj [s], ``tau0_ratio``/``tau_ratio`` (S, 16) (τ0 = ratio·T_sj),
-    ``tau0``/``tau`` (S, 16) [s] their nominal values, ``trial_label`` (S, K, 16) label index
-    of each movement of each trial, ``trial_T``, ``trial_tau0``, ``trial_tau`` (S, K, 16) the
-    jittered values of each movement [s], ``trial_target`` (S, K, 16, 2) the noisy end points,
-    ``trial_q0`` (S, K, 16, 3) the start postures, ``onset`` (S, K, 16) the simulation start
-    time in the trial [s], ``params`` the options used."""
+    """A synthetic pointing experiment (made by :func:`synthetic_pointing_experiment`).
+
+    **Fields:**
+
+    - ``recording``: the :class:`PointingRecording`.
+    - ``donders``: the :class:`DondersRecording`, one Donders session per subject.
+    - ``files``: paths written, by kind (``"pointing"``, ``"donders"``; empty without ``out``).
+    - ``truth``: a dict of the generating values: ``subjects``, ``KJ`` (S, 3, 3), ``q_rest``
+      (S, 3), ``labels`` (16,), ``T`` (S, 16) mean durations T_sj [s], ``tau0_ratio``/``tau_ratio``
+      (S, 16) (τ0 = ratio·T_sj), ``tau0``/``tau`` (S, 16) [s] their nominal values, ``trial_label``
+      (S, K, 16) label index of each movement of each trial, ``trial_T``, ``trial_tau0``,
+      ``trial_tau`` (S, K, 16) the jittered values of each movement [s], ``trial_target``
+      (S, K, 16, 2) the noisy end points, ``trial_q0`` (S, K, 16, 3) the start postures, ``onset``
+      (S, K, 16) the simulation start time in the trial [s], ``params`` the options used.
+    """
 
     recording: PointingRecording
     donders: DondersRecording
@@ -501,7 +544,7 @@ def synthetic_pointing_experiment(
 ) -> SyntheticPointing:
     """A seeded synthetic center-out experiment from the λ0-PMP, in the recording format.
 
-    **Protocol** (design §3.2, ``center_out_trials``): per subject ``n_trials`` trials, each
+    **Protocol** (as :func:`center_out_trials`): per subject ``n_trials`` trials, each
     visiting the 8 peripheral targets in a random order, each outbound movement followed by the
     inbound one (16 movements). A trial starts with the hand resting on the centre; at each cue
     the ``target`` column switches to the next target, the hand rests 0.2–0.3 s (reaction time),
@@ -509,6 +552,7 @@ def synthetic_pointing_experiment(
     until it has settled) and holds still at the target 0.25–0.4 s. Samples at ``rate`` [Hz].
 
     **Arguments:**
+
     - ``out``: folder to write ``pointing.<fmt>`` and ``donders.<fmt>`` into (created); None
       keeps everything in memory. ``fmt``: "csv" or "npz".
     - ``subjects``: Table 1–2 subjects (names or numbers, default all six: ``paper_subjects``).
@@ -525,8 +569,18 @@ def synthetic_pointing_experiment(
     - ``n_donders``, ``donders_noise_deg``: the Donders session per subject
       (``synthetic_recordings``: steady postures over ±20°).
     - ``radius``: target distance [m] (default π/12, ``center_out``); ``d`` screen distance [m].
+    - ``n_trials``: trials per subject; ``rate``: IMU sampling rate [Hz]; ``seed``: the seed of
+      every random draw (the same seed gives the same experiment).
 
-    Returns a :class:`SyntheticPointing` (recording, Donders session, files, ground truth).
+    **Returns:**
+
+    A :class:`SyntheticPointing` (recording, Donders session, files, ground truth).
+
+    **Raises:**
+
+    ``ValueError`` naming the argument for unknown or repeated subjects, non-positive sizes,
+    durations or rates, negative noise levels, a bad ``fmt`` or shapes of ``T`` and the ratios;
+    ``RuntimeError`` if a simulated movement fails (it names the status).
     """
     if fmt not in ("csv", "npz"):
         raise ValueError(f"`fmt` must be 'csv' or 'npz', got {fmt!r}")
