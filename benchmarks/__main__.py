@@ -4,7 +4,7 @@ Each script ``benchmarks/<name>.py`` runs in its own process (so compile caches 
 do not leak between them) and writes ``<results>/<name>.json`` (``benchmarks/results/`` for full
 runs, ``benchmarks/results/quick/`` with ``--quick``). The JSON holds ``ratios`` (name → value,
 pmpjax against the baseline run in the same process), optionally ``targets`` (name → the ratio
-the issue asks for) and ``scaling`` (rows ``{"series", "B", "seconds"}``: cost per call at batch
+the project aims for) and ``scaling`` (rows ``{"series", "B", "seconds"}``: cost per call at batch
 size B). This runner prints one table of every ratio, writes ``summary.json`` and draws the
 cost-versus-batch-size plot ``scaling.png``.
 """

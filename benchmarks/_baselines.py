@@ -308,7 +308,7 @@ def build_numba():
 
 
 # ----------------------------------------------------------------------------------------------
-# timing helpers
+# timing
 
 
 def lambda0_rhs(fk_jac, q0, target, KJ, q_rest, tau, tau0):

@@ -21,7 +21,7 @@ Usage: ``python benchmarks/sweep.py [--movements 1000000] [--repeats 1] [--quick
 ``--overhead --movements 100000 --repeats 2``: only bare kernel vs sweep, interleaved, min of repeats.
 
 Latest figures (2026-12-01 17:24-18:28 UTC, 2-core AMD EPYC (KVM), no GPU, jax 0.10.2, float64;
-the machine shared with six other sessions: load average 14.9 at the start, 18.1 at the end,
+the machine shared with six other jobs: load average 14.9 at the start, 18.1 at the end,
 11-21 in between; each configuration ran once, so the ratios carry that load's noise)::
 
     10^6 movements (125 000 rows, 63 chunks of 2 000 rows)   wall [s]  movements/s  vs bare kernel

@@ -92,7 +92,7 @@ def minjerk_gain(t, T, cap):
     return min(30.0 * s * s / (T * (1.0 - s) * (6.0 * s * s + 3.0 * s + 1.0)), cap)
 
 
-# --- central differences: the one helper of the suite -------------------------------------------
+# --- central differences: the suite's one finite-difference routine -------------------------------
 
 SQRT_EPS = float(np.sqrt(np.finfo(float).eps))
 

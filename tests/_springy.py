@@ -9,8 +9,8 @@ import numpy as np
 
 
 def central_diff(f, x0):
-    """Central differences of scalar ``f`` at ``x0``, shaped like ``x0`` (the suite's one helper,
-    ``_reference.central_diff``)."""
+    """Central differences of scalar ``f`` at ``x0``, shaped like ``x0`` (the suite's one finite-difference
+    routine, ``_reference.central_diff``)."""
     x0 = np.asarray(x0, float)
     return _reference.central_diff(f, x0).reshape(x0.shape)
 

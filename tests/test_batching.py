@@ -1,4 +1,4 @@
-"""The shared helpers of pmpjax._base: batch broadcasting/padding and the one Newton solver."""
+"""The shared routines of pmpjax._base: batch broadcasting/padding and the one Newton solver."""
 
 import jax
 import jax.numpy as jnp
@@ -28,7 +28,7 @@ def test_broadcast_flatten_round_trip():
 
 
 def test_concrete_arrays_are_batched_without_compiling():
-    # Which bug: a helper that reshapes, pads or slices a concrete jax.Array with an eager jnp op
+    # Which bug: a routine that reshapes, pads or slices a concrete jax.Array with an eager jnp op
     # (or converts NumPy with jnp.asarray) compiles an XLA program for every new shape: 30-100 ms
     # each, hundreds in one `pmpjax reproduce`.
     a = jax.device_put(np.arange(7 * 3, dtype=float).reshape(7, 3) + 0.25)  # a shape nothing else uses

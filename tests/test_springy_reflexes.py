@@ -27,7 +27,7 @@ DUR = 3.0
 PUSH = (1.8, 2.4)  # the reach to P[1] (0-1 s) has rung down by then (damping ratio ≈ 0.5)
 LEAD_ON = (1.6, 2.6)
 RELEASE = 2.6
-TOUCH_1J = 0.4  # the issue's case: one-joint reach 0 -> 1, touched at 0.4 s
+TOUCH_1J = 0.4  # the grasp case: one-joint reach 0 -> 1, touched at 0.4 s
 LEAD_THRESHOLD_DOC = 0.5  # [Nm]: ReflexNetwork's documented default lead_threshold
 # Lead pushes ramped up over RAMP s, sized by the documented threshold: the static joint torque
 # J^T F of the largest-loaded joint at the settled posture times these factors (the record's own
@@ -123,11 +123,11 @@ def test_mjx_reflex_run_matches_c_mujoco(arm, scenarios, mjx_reflex):
 
 
 def test_grasp_stops_where_touched_without_overshoot(arm, free_arm, scenarios):
-    """The issue's case: a one-joint reach 0 -> 1 touched at 0.4 s. The arm 'quickly stops, and
+    """The grasp case: a one-joint reach 0 -> 1 touched at 0.4 s. The arm 'quickly stops, and
     holds itself in the stopped position' (Figure 8): it brakes within a few cm, never swings back
-    past the touched posture, and holds that posture (not a gravity sag below it). With the old
-    network (a 0.25 s move added on top of the running reach) the same run went 0.13 rad past the
-    touched posture, swung 0.10 rad back below it and was still 0.06 rad off at the end."""
+    past the touched posture, and holds that posture (not a gravity sag below it). Which bug: a
+    stop implemented as a 0.25 s move added on top of the running reach goes 0.13 rad past the
+    touched posture, swings 0.10 rad back below it and is still 0.06 rad off at the end."""
     tr, mode, t = scenarios["traj"], scenarios["mode"], scenarios["t"]
     i = 5
     k = int(np.argmax(mode[i] == GRASP))

@@ -3,7 +3,7 @@ its ``parts`` protocol, ``workers`` and ``display``), its ``report``, the ``simu
 and pmpjax's own parts (``figures``, ``primitives``). No library module imports it.
 
 This face holds what other applications built on pmpjax (``fitting._app``) use: the part protocol,
-the command line's text helpers, and the simulation-config reader of the data layer that the sweep
+the command line's text functions, and the simulation-config reader of the data layer that the sweep
 command extends.
 """
 
