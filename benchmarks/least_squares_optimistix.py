@@ -22,7 +22,7 @@ hold; optimistix 0.1.0, equinox 0.13.8; 16 subjects)::
     optimistix d q_rest[PS] / d postures (1500 inputs, reverse mode): compile 357.3 s, run 1.014 s;
         directional -3.265424e-04 vs central difference -3.264766e-04
 
-Decision (written in ``fitting/_optimise.py``): keep the hand-written LM (1.8× faster to compile,
+Decision (written in ``fitting/_optimise/least_squares.py``): keep the hand-written LM (1.8× faster to compile,
 2.1× faster to run, same optima); optimistix's implicit gradients work but no fit needs them.
 """
 

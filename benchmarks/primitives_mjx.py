@@ -15,8 +15,9 @@ Run times are the minimum of repeats (``block_until_ready`` for MJX). Run:
 
 Latest figures (2026-12-01, 2-core CPU, no GPU, shared with other jobs: load average ≈ 12 at
 start and end, so absolute times are inflated several-fold; ratios are taken in the same run):
-
-    FIGURES
+MJX runs the arms at 0.06–0.13× the steps per second of MuJoCo's batch rollout and compiles its
+batch kernel in 48–129 s. That run's table was not kept; a run (≈ 5–10 min) writes it to
+``benchmarks/results/primitives_mjx.json``.
 
 Reading: on this CPU the C path wins at every batch size. MuJoCo's batch rollout removes the
 Python overhead of the loop (one ``mj_step`` call per step) and runs the arms on both cores; MJX's
