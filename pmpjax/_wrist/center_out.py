@@ -25,9 +25,24 @@ TARGET_RADIUS = float(np.pi / 12)
 
 
 def target_radius(radius: float | None = None, *, angle_deg: float | None = None, d: float = 1.0) -> float:
-    """The target radius [m]: ``radius`` if given, else ``d·sin(angle_deg)`` if given, else
-    :data:`TARGET_RADIUS` (π/12, the paper's nominal distance). Raises ``ValueError`` naming the
-    argument for both given, non-positive values or an angle outside (0°, 80°]."""
+    """The distance of the center-out targets from the centre.
+
+    **Arguments:**
+
+    - ``radius``: the distance [m], if given.
+    - ``angle_deg``: else a true visual angle [deg] in (0, 80] at screen distance ``d``: ``r = d sin angle``.
+    - ``d``: screen distance [m].
+
+    **Returns:**
+
+    The radius [m]: ``radius``, ``d·sin(angle_deg)``, or :data:`TARGET_RADIUS` (π/12, the paper's
+    nominal distance) when neither is given.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for both given, non-positive values or an angle outside
+      (0°, 80°].
+    """
     if radius is not None and angle_deg is not None:
         raise ValueError("give at most one of `radius` [m] and `angle_deg` [deg]")
     if not (np.isfinite(d) and d > 0):
@@ -45,10 +60,20 @@ def target_radius(radius: float | None = None, *, angle_deg: float | None = None
 
 def center_out_targets(radius: float | None = None, *, angle_deg: float | None = None,
                        d: float = 1.0) -> dict[str, np.ndarray]:
-    """``{"C": (0, 0), "N": (0, r), "NE": ..., ...}`` screen positions (2,) [m].
+    """The nine targets of the center-out task: the centre and eight on a circle.
 
-    ``r`` from :func:`target_radius`: default π/12 m (the paper's nominal distance), or ``radius``
-    [m], or ``angle_deg`` for a true visual angle at screen distance ``d`` (``r = d sin angle``).
+    **Arguments:**
+
+    - ``radius``, ``angle_deg``, ``d``: the circle's radius as in :func:`target_radius` (default π/12 m).
+
+    **Returns:**
+
+    ``{"C": (0, 0), "N": (0, r), "NE": ..., ...}``: (2,) screen positions [m] by name (``E`` = +x1,
+    ``N`` = +x2).
+
+    **Raises:**
+
+    - ``ValueError`` as :func:`target_radius`.
     """
     r = target_radius(radius, angle_deg=angle_deg, d=d)
     out = {"C": np.zeros(2)}
@@ -60,12 +85,25 @@ def center_out_targets(radius: float | None = None, *, angle_deg: float | None =
 
 def center_out_trials(n_trials: int, *, seed: int = 0, radius: float | None = None,
                       angle_deg: float | None = None, d: float = 1.0):
-    """Seeded trial orders: each trial visits the 8 peripheral targets once in a random order,
-    each outbound movement followed by the inbound one.
+    """Seeded trial orders of the center-out task.
 
-    Returns ``(order, targets)``: ``order`` (n_trials, 8) direction names, ``targets``
-    (n_trials, 16, 2) the movement end points ``[P1, C, P2, C, ...]`` (radius as in
-    :func:`center_out_targets`).
+    Each trial visits the 8 peripheral targets once in a random order, each outbound movement
+    followed by the inbound one.
+
+    **Arguments:**
+
+    - ``n_trials``: number of trials.
+    - ``seed``: seed of the random orders.
+    - ``radius``, ``angle_deg``, ``d``: the targets' radius as in :func:`target_radius`.
+
+    **Returns:**
+
+    ``(order, targets)``: ``order`` (n_trials, 8) direction names; ``targets`` (n_trials, 16, 2) the
+    movement end points ``[P1, C, P2, C, ...]`` [m].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a non-positive ``n_trials`` or as :func:`target_radius`.
     """
     check_positive_int("n_trials", n_trials)
     rng = np.random.default_rng(seed)

@@ -64,7 +64,21 @@ _JOINT_COLS = ("q_ps", "q_fe", "q_rud")
 
 @dataclasses.dataclass(frozen=True)
 class DondersRecording:
-    """Steady postures of S subjects (see module docstring for shapes and units)."""
+    """Steady wrist postures of S subjects with up to N samples each.
+
+    Made by :func:`read_recordings`, :func:`recording_from_arrays` or :func:`synthetic_recordings`;
+    construction checks shapes, finiteness, unit quaternions and reachable pointing, and raises
+    ``ValueError`` naming the problem.
+
+    **Fields:**
+
+    - ``subjects``: (S,) names (unique).
+    - ``quat``: (S, N, 4) hand orientations (unit, scalar-first ``w, x, y, z``, hand-to-world, the
+      frame of Eq 6).
+    - ``pointing``: (S, N, 2) screen points ``(x1, x2)`` [m].
+    - ``mask``: (S, N) bool valid samples (subjects may have different counts).
+    - ``d``: screen distance [m].
+    """
 
     subjects: tuple[str, ...]
     quat: np.ndarray
@@ -130,14 +144,34 @@ def synthetic_recordings(
     d: float = 1.0,
     names=None,
 ) -> DondersRecording:
-    """Synthetic steady postures of subjects ``(KJ (S, 3, 3), q_rest (S, 3))``.
+    """Synthetic steady postures of subjects with known ``KJ`` and ``q_rest``.
 
-    Targets are uniform over the ±``half_angle_deg`` screen square (``|x_i| ≤ d sin(angle)``);
-    the posture is the equilibrium (§3.1); noise is a random rotation in the hand frame with RMS
-    angle ``noise_deg`` (scalar or (S,); isotropic Gaussian rotation vector, each component
-    ``N(0, noise²/3)``), ``R_obs = R(q_eq) exp(ε̂)``. As
-    with an IMU, the recorded pointing is the point the *noisy* orientation points at (Eq 6), so
-    pointing and orientation are consistent. Seeded (``numpy.random.default_rng(seed)``).
+    Targets are uniform over the ±``half_angle_deg`` screen square (``|x_i| ≤ d sin(angle)``); the
+    posture is the λ0-PMP's equilibrium (:func:`equilibrium_posture`); noise is a random rotation in
+    the hand frame, ``R_obs = R(q_eq) exp(ε̂)`` with an isotropic Gaussian rotation vector ``ε``
+    (each component ``N(0, noise²/3)``). As with an IMU, the recorded pointing is the point the
+    *noisy* orientation points at (Eq 6), so pointing and orientation are consistent.
+
+    **Arguments:**
+
+    - ``KJ``: (S, 3, 3) SPD joint stiffness [Nm/rad].
+    - ``q_rest``: (S, 3) rest postures [rad].
+    - ``n_samples``: postures per subject.
+    - ``noise_deg``: RMS angle of the orientation noise [deg], scalar or (S,).
+    - ``seed``: seed of ``numpy.random.default_rng``.
+    - ``half_angle_deg``: half-angle of the target area [deg], in (0, 90).
+    - ``d``: screen distance [m].
+    - ``names``: S subject names (default ``subj1``, ``subj2``, ...).
+
+    **Returns:**
+
+    A :class:`DondersRecording`.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for shapes that do not agree, non-SPD ``KJ``, non-positive
+      sizes or distances, negative noise, a half-angle outside (0, 90), the wrong number of names,
+      or parameters whose equilibria cannot be computed.
     """
     KJ = np.asarray(as_array("KJ", KJ, tail=(3, 3)), dtype=float)
     q_rest = np.asarray(as_array("q_rest", q_rest, tail=(3,)), dtype=float)
@@ -172,8 +206,26 @@ def synthetic_recordings(
 
 
 def recording_from_arrays(subjects, pointing, *, quat=None, joint_angles=None, mask=None, d=1.0):
-    """Build a validated :class:`DondersRecording` from arrays (S, N, ·); give ``quat`` or
-    ``joint_angles``."""
+    """Build a validated :class:`DondersRecording` from arrays; give ``quat`` or ``joint_angles``.
+
+    **Arguments:**
+
+    - ``subjects``: (S,) names.
+    - ``pointing``: (S, N, 2) screen points [m].
+    - ``quat``: (S, N, 4) hand-to-world quaternions ``(w, x, y, z)``, or
+    - ``joint_angles``: (S, N, 3) wrist joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+    - ``mask``: optional (S, N) bool valid samples (default all).
+    - ``d``: screen distance [m].
+
+    **Returns:**
+
+    The :class:`DondersRecording`.
+
+    **Raises:**
+
+    - ``ValueError`` for both or neither of ``quat`` and ``joint_angles``, and as
+      :class:`DondersRecording` for bad shapes or values.
+    """
     pointing = np.asarray(as_array("pointing", pointing, tail=(2,), finite=False), dtype=float)
     if (quat is None) == (joint_angles is None):
         raise ValueError("give exactly one of `quat` (S, N, 4) or `joint_angles` (S, N, 3)")
@@ -192,7 +244,18 @@ def recording_from_arrays(subjects, pointing, *, quat=None, joint_angles=None, m
 
 
 def write_recordings(path, rec: DondersRecording) -> None:
-    """Write ``rec`` to ``path`` (``.csv`` or ``.npz``, see module docstring)."""
+    """Write a Donders recording as CSV or NPZ (the format :func:`read_recordings` reads).
+
+    **Arguments:**
+
+    - ``path``: the file, ``.csv`` (``subject,sample,qw,qx,qy,qz,x1,x2`` with a ``# d=`` line) or
+      ``.npz``.
+    - ``rec``: the :class:`DondersRecording`.
+
+    **Raises:**
+
+    - ``ValueError`` naming ``path`` for another suffix.
+    """
     path = os.fspath(path)
     if path.endswith(".npz"):
         np.savez(
@@ -223,7 +286,25 @@ def write_recordings(path, rec: DondersRecording) -> None:
 
 
 def read_recordings(path) -> DondersRecording:
-    """Read a recording written by :func:`write_recordings` or by hand in the same format."""
+    """Read a Donders recording (CSV or NPZ, the format of the module docstring) strictly.
+
+    CSV: ``subject,sample,qw,qx,qy,qz,x1,x2`` (or joint angles ``q_ps,q_fe,q_rud`` [rad] instead of
+    the quaternion), one row per steady posture; a line ``# d=<metres>`` gives the screen distance.
+
+    **Arguments:**
+
+    - ``path``: a file written by :func:`write_recordings` or by hand in the same format.
+
+    **Returns:**
+
+    A :class:`DondersRecording`.
+
+    **Raises:**
+
+    - ``ValueError`` naming the file, line (or array) and problem: another suffix, empty or malformed
+      files, missing columns, non-numeric fields, NaN/inf, duplicate samples, non-unit quaternions
+      and pointing outside the wrist's reachable screen.
+    """
     path = os.fspath(input_file("path", path))
     if path.endswith(".npz"):
         return _read_npz(path)
