@@ -10,10 +10,7 @@ from .._base.validate import as_array, to_jax
 
 
 def curvature_areas(path, start, end):
-    """Areas between a path and the directed line from ``start`` to ``end`` (Figure 4).
-
-    ``path`` (..., S, 2), ``start``/``end`` (..., 2) in task units. Returns ``(A_R, A_L)``
-    (...,), the non-negative raw areas (task units²) enclosed on the right / left of the line.
+    """Areas between a path and the directed line from ``start`` to ``end`` (the paper's Figure 4).
 
     **Convention (open paths).** The enclosed region is that of the closed polygon
     ``start → path[0] → … → path[-1] → end → start``: paths that do not begin or end on the line
@@ -25,8 +22,21 @@ def curvature_areas(path, start, end):
     measure, pass the movement's own first and last points as ``start``/``end`` (Figure 4
     caption: the line joins the movement's start and end); the closing segments then vanish.
     Normalise by the squared target distance for the paper's ``A`` values
-    (``curvature_measures``). Differentiable in all arguments (except where the line has zero
+    (:func:`curvature_measures`). Differentiable in all arguments (except where the line has zero
     length).
+
+    **Arguments:**
+
+    - ``path``: (..., S, 2) path samples in task units (screen [m]).
+    - ``start``, ``end``: (..., 2) the line's ends, directed from ``start`` to ``end``.
+
+    **Returns:**
+
+    ``(A_R, A_L)``: (...,) the non-negative raw areas (task units²) on the right and left of the line.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, NaN/inf, or fewer than 2 samples.
     """
     return _areas(*_check_line(path, start, end))
 
@@ -65,10 +75,23 @@ def _areas(path, start, end):
 
 
 def curvature_measures(path, start, end, *, scale: float = np.pi / 12):
-    """``A_sum = A_R + A_L``, ``A_net = A_R − A_L`` normalised by ``scale²`` (...,).
+    """The paper's curvature measures ``A_sum = A_R + A_L`` and ``A_net = A_R − A_L``.
 
-    ``scale`` is the nominal target-to-target distance (paper: π/12, the default target radius
-    of ``center_out_targets``). See :func:`curvature_areas` for the convention on open paths.
+    See :func:`curvature_areas` for the convention on open paths.
+
+    **Arguments:**
+
+    - ``path``, ``start``, ``end``: as :func:`curvature_areas`.
+    - ``scale``: the normaliser, the nominal target-to-target distance (paper: π/12 m, the default
+      target radius of :func:`center_out_targets`).
+
+    **Returns:**
+
+    ``(A_sum, A_net)``: (...,) areas normalised by ``scale²`` (dimensionless).
+
+    **Raises:**
+
+    - ``ValueError`` as :func:`curvature_areas`.
     """
     path, start, end = _check_line(path, start, end)
     return _measures(path, start, end, scale)

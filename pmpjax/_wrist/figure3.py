@@ -18,13 +18,28 @@ FIGURE3 = dict(KJ=np.diag([0.5, 1.5, 2.0]), q_rest=np.deg2rad([5.0, 0.0, 0.0]), 
 
 
 def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
-    """Outbound and inbound λ0-PMP movements between the centre and each of the 8 targets.
+    """The movements of the paper's Figure 3: outbound and inbound λ0-PMP movements between the
+    centre and each of the 8 targets.
 
-    Parameters default to :data:`FIGURE3` (override any by keyword). Each direction starts at
-    ``q_rest`` (which points at the centre) and runs centre → target → centre, ``duration`` each.
-    Returns numpy arrays: ``t`` (S,), ``q`` (8, 2, S, 3), ``x`` (8, 2, S, 2), ``speed`` (8, 2, S),
-    ``targets`` (8, 2), ``A_sum``/``A_net`` (8, 2) normalised curvature areas (out, in),
-    ``A_hyst`` (8,), and the parameters used. The areas are normalised by ``radius²``.
+    Each direction starts at ``q_rest`` (which points at the centre) and runs centre → target →
+    centre, ``duration`` each (RK4).
+
+    **Arguments:**
+
+    - ``dt``: integration step [s].
+    - ``save_every``: save every this many steps.
+    - ``overrides``: any of the parameters in :data:`FIGURE3` (``KJ``, ``q_rest``, ``tau0``, ``tau``,
+      ``k``, ``duration``, ``radius``, ...), which default to the paper's.
+
+    **Returns:**
+
+    A dict of NumPy arrays: ``t`` (S,) [s], ``q`` (8, 2, S, 3) [rad], ``x`` (8, 2, S, 2) [m],
+    ``speed`` (8, 2, S) [m/s], ``targets`` (8, 2) [m], ``A_sum``/``A_net`` (8, 2) curvature areas
+    (out, in) normalised by ``radius²``, ``A_hyst`` (8,), and the parameters used.
+
+    **Raises:**
+
+    - ``TypeError`` for an unknown parameter; ``ValueError`` for a non-positive ``dt``.
     """
     unknown = sorted(set(overrides) - set(FIGURE3))
     if unknown:
@@ -49,7 +64,21 @@ def figure3_data(*, dt: float = 1e-3, save_every: int = 5, **overrides) -> dict:
 
 
 def plot_figure3(data: dict, *, fig=None):
-    """Panels A (task paths), B (joint trajectories), C (tangential speed). Returns the figure."""
+    """The paper's Figure 3: panels A (task paths), B (joint trajectories), C (tangential speed).
+
+    **Arguments:**
+
+    - ``data``: the result of :func:`figure3_data`.
+    - ``fig``: a matplotlib figure to draw into (default a new one).
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``ValueError`` when ``data`` lacks an entry of :func:`figure3_data`'s result.
+    """
     import matplotlib.pyplot as plt
 
     missing = [k for k in ("t", "x", "q", "speed", "targets", "directions") if k not in data]

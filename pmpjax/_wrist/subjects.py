@@ -21,7 +21,14 @@ _FILE = "tommasino2017_tables.json"
 
 @dataclasses.dataclass(frozen=True)
 class Subject:
-    """``name``; ``KJ`` (3, 3) SPD stiffness [Nm/rad]; ``q_rest`` (3,) rest posture [rad] (PS, FE, RUD)."""
+    """One subject of Tommasino & Campolo (2017), Tables 1–2 (made by :func:`load_subject`).
+
+    **Fields:**
+
+    - ``name``: ``"subj1"`` … ``"subj6"``.
+    - ``KJ``: (3, 3) SPD joint stiffness [Nm/rad].
+    - ``q_rest``: (3,) rest posture ``(q_PS, q_FE, q_RUD)`` [rad].
+    """
 
     name: str
     KJ: np.ndarray
@@ -34,12 +41,33 @@ def _table() -> dict:
 
 
 def subject_names() -> tuple[str, ...]:
-    """Names of the tabulated subjects: ``("subj1", ..., "subj6")``."""
+    """Names of the tabulated subjects.
+
+    **Returns:**
+
+    ``("subj1", ..., "subj6")``.
+    """
     return tuple(_table()["subjects"])
 
 
 def load_subject(name: str, *, normalize: bool = True) -> Subject:
-    """One subject of Tables 1–2 by name (``"subj1"`` … ``"subj6"``; ``"Subj 1"`` and ``1`` also work)."""
+    """One subject of Tables 1–2 by name.
+
+    **Arguments:**
+
+    - ``name``: ``"subj1"`` … ``"subj6"`` (``"Subj 1"`` and ``1`` also work).
+    - ``normalize``: rescale ``KJ`` to trace exactly 4 Nm/rad (the printed traces are 3.99–4.00);
+      ``False`` gives the table as printed.
+
+    **Returns:**
+
+    The :class:`Subject`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-bool ``normalize``; ``ValueError`` for an unknown subject (naming the
+      available ones).
+    """
     if not isinstance(normalize, bool | np.bool_):
         raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
     key = str(name).lower().replace(" ", "")
@@ -56,7 +84,21 @@ def load_subject(name: str, *, normalize: bool = True) -> Subject:
 
 
 def paper_subjects(*, normalize: bool = True) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """All six subjects stacked: ``(names, KJ (6, 3, 3), q_rest (6, 3))``."""
+    """All six subjects of Tables 1–2, stacked.
+
+    **Arguments:**
+
+    - ``normalize``: rescale ``KJ`` to trace exactly 4 Nm/rad (the printed traces are 3.99–4.00);
+      ``False`` gives the table as printed.
+
+    **Returns:**
+
+    ``(names, KJ, q_rest)``: six names, (6, 3, 3) stiffnesses [Nm/rad] and (6, 3) rest postures [rad].
+
+    **Raises:**
+
+    - ``TypeError`` for a non-bool ``normalize``.
+    """
     if not isinstance(normalize, bool | np.bool_):
         raise TypeError(f"`normalize` must be a bool, got {type(normalize).__name__}")
     subs = [load_subject(n, normalize=normalize) for n in subject_names()]
