@@ -137,20 +137,83 @@ def _operator_jit(which, J, W, w, tau_el):
 
 
 def weighted_pinv(J, W=None, *, w=None):
-    """W-weighted pseudo-inverse ``W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` (..., n, m) (Eq 3)."""
+    """The W-weighted pseudo-inverse ``J#_W = W⁻¹ Jᵀ (J W⁻¹ Jᵀ)⁻¹`` (Eq 3).
+
+    **Arguments:**
+
+    - ``J``: (..., m, n) Jacobians, wide (m <= n).
+    - ``W``: (..., n, n) SPD joint damping / weight matrix, or
+    - ``w``: (..., n) positive diagonal weights instead (give exactly one of ``W`` and ``w``).
+
+    **Returns:**
+
+    (..., n, m) the pseudo-inverse.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, a tall ``J``, both or neither of ``W`` and ``w``,
+      non-SPD ``W`` or non-positive ``w``.
+    """
     return _operator("pinv", J, W, w)
 
 
 def nullspace_projector(J, W=None, *, w=None):
-    """``I − J#_W J`` (..., n, n): projects joint velocities onto motions that leave x still."""
+    """The null-space projector ``I − J#_W J``: joint velocities that leave the task position still.
+
+    **Arguments:**
+
+    - ``J``: (..., m, n) Jacobians, wide (m <= n).
+    - ``W``: (..., n, n) SPD joint damping / weight matrix, or
+    - ``w``: (..., n) positive diagonal weights instead (give exactly one of ``W`` and ``w``).
+
+    **Returns:**
+
+    (..., n, n) the projector.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, a tall ``J``, both or neither of ``W`` and ``w``,
+      non-SPD ``W`` or non-positive ``w``.
+    """
     return _operator("null", J, W, w)
 
 
 def task_damping(J, W=None, *, w=None):
-    """Task-space damping ``B = (J W⁻¹ Jᵀ)⁻¹`` (..., m, m) (Eq 3)."""
+    """Task-space damping ``B = (J W⁻¹ Jᵀ)⁻¹`` (Eq 3).
+
+    **Arguments:**
+
+    - ``J``: (..., m, n) Jacobians, wide (m <= n).
+    - ``W``: (..., n, n) SPD joint damping / weight matrix, or
+    - ``w``: (..., n) positive diagonal weights instead (give exactly one of ``W`` and ``w``).
+
+    **Returns:**
+
+    (..., m, m) the task damping.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, a tall ``J``, both or neither of ``W`` and ``w``,
+      non-SPD ``W`` or non-positive ``w``.
+    """
     return _operator("damping", J, W, w)
 
 
 def lambda0(J, W, tau_el):
-    """Task force ``λ0 = B J W⁻¹ τ_el`` (..., m) that blocks ``τ_el`` (..., n) in task space (Eq 4)."""
+    """The task force ``λ0 = B J W⁻¹ τ_el`` that blocks the elastic torque in task space (Eq 4).
+
+    **Arguments:**
+
+    - ``J``: (..., m, n) Jacobians, wide (m <= n).
+    - ``W``: (..., n, n) SPD joint damping.
+    - ``tau_el``: (..., n) elastic torque ``KJ (q − q_rest)`` [Nm].
+
+    **Returns:**
+
+    (..., m) the task force ``λ0``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, a tall ``J`` or a non-SPD ``W``.
+    """
     return _operator("lambda0", J, W, None, tau_el)
