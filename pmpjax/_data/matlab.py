@@ -126,12 +126,24 @@ def _from_h5(f, node, where: str):
 
 
 def read_mat(path) -> dict:
-    """Read a MAT-file (v5 through scipy.io, v7.3 through h5py) into nested dicts/lists/arrays.
+    """Read a MAT-file (v5 through scipy.io, v7.3 through h5py) into nested dicts, lists and arrays.
 
     Structs -> dicts, cells and struct arrays -> lists (column-major order), char -> str, numeric
     arrays squeezed (as ``scipy.io.loadmat(simplify_cells=True)``), for both versions.
-    Raises ``ValueError`` (no such file, a directory, empty, not a MAT-file, unreadable,
-    unsupported content) naming the file and, where it applies, the variable (``data{2}.Natural.Target1{3}.dq``).
+
+    **Arguments:**
+
+    - ``path``: the MAT-file.
+
+    **Returns:**
+
+    ``{variable: value}``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the file and, where it applies, the variable
+      (``data{2}.Natural.Target1{3}.dq``): no such file, a directory, empty, not a MAT-file,
+      unreadable, unsupported content (objects, sparse matrices).
     """
     path = input_file("path", path)
     version = mat_version(path)
@@ -220,11 +232,19 @@ def _write_h5(f, group, name, obj, counter):
 
 
 def write_mat(path, variables: dict, *, version: str = "5") -> None:
-    """Write nested dicts (structs), lists (N×1 cells), str (char) and numeric arrays (double)
-    as a MAT-file v5 (``scipy.io.savemat``, compressed) or v7.3 (HDF5 with MATLAB's header).
+    """Write nested dicts (structs), lists (N×1 cells), str (char) and numeric arrays (double) as a
+    MAT-file v5 (``scipy.io.savemat``, compressed) or v7.3 (HDF5 with MATLAB's header).
 
-    Raises ``ValueError``/``TypeError`` naming the variable or field that cannot be written, and
-    ``FileNotFoundError`` when the target directory does not exist.
+    **Arguments:**
+
+    - ``path``: the file to write.
+    - ``variables``: a non-empty ``{name: value}`` dict of valid MATLAB names.
+    - ``version``: ``"5"`` or ``"7.3"``.
+
+    **Raises:**
+
+    - ``ValueError``/``TypeError`` naming the variable or field that cannot be written, or a bad
+      ``version``; ``FileNotFoundError`` when the target directory does not exist.
     """
     path = as_path("path", path)
     if version not in ("5", "7.3"):
@@ -298,10 +318,19 @@ def _participants(dataset, name="dataset"):
 
 
 def write_ik_dataset(path, dataset: dict, *, version: str = "5") -> None:
-    """Write an IK data set (see module docstring) in the paper's layout, MAT v5 or v7.3.
+    """Write an IK data set (see the module docstring) in the paper's layout, MAT v5 or v7.3.
 
-    Raises ``ValueError`` naming the participant, condition, target, trial and field of any
-    malformed entry.
+    **Arguments:**
+
+    - ``path``: the file to write.
+    - ``dataset``: the Python form :func:`load_ik_dataset` returns (``participants``, optional
+      ``w_true``).
+    - ``version``: ``"5"`` or ``"7.3"``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the participant, condition, target, trial and field of any malformed
+      entry, or a bad ``version``.
     """
     path = as_path("path", path)
     if version not in ("5", "7.3"):
@@ -380,11 +409,22 @@ def _is_plain(v) -> bool:
 def load_ik_dataset(path) -> dict:
     """Read an IK data set in the paper's layout (MAT v5 or v7.3) into the Python form.
 
-    Returns ``{"participants": [...], "ik_data": [{cond: {"qdot" (K, n), "xdot" (K, m),
-    "J" (K, m, n)}}], "w_true": [...] or None}``. Trials may be a cell of structs or a struct
-    array; numeric and char fields beside the conditions and targets are ignored. Raises
-    ``ValueError`` naming the file, participant, condition, target, trial and field
-    of any malformed entry.
+    Trials may be a cell of structs or a struct array; numeric and char fields beside the
+    conditions and targets are ignored.
+
+    **Arguments:**
+
+    - ``path``: the MAT-file.
+
+    **Returns:**
+
+    ``{"participants": [...], "ik_data": [{cond: {"qdot" (K, n) [rad/s], "xdot" (K, m), "J"
+    (K, m, n)}}], "w_true": [...] or None}``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the file, participant, condition, target, trial and field of any
+      malformed entry.
     """
     path = as_path("path", path)
     raw = read_mat(path)
@@ -449,12 +489,25 @@ def load_ik_dataset(path) -> dict:
 
 
 def ik_dataset_arrays(dataset: dict, conditions=None, targets=None):
-    """Pad a data set into arrays for vectorised estimation.
+    """Pad a data set into arrays for vectorised estimation (``fitting.estimate_ik_weights``).
 
-    Returns ``dict(qdot (P, C, T, R, S, n), xdot (P, C, T, R, S, m), J (P, C, T, R, S, m, n),
-    mask (P, C, T, R, S), conditions, targets)``; missing trials are masked (zeros, ``J`` = [I 0]).
-    ``conditions``/``targets`` select and order them (default: those of the first participant);
-    raises ``ValueError`` naming a participant that lacks one, or trials of other sizes n, m.
+    Missing trials are masked (zeros, ``J`` = [I 0]).
+
+    **Arguments:**
+
+    - ``dataset``: the Python form of :func:`load_ik_dataset`.
+    - ``conditions``, ``targets``: select and order them (default: those of the first participant).
+
+    **Returns:**
+
+    ``dict(qdot (P, C, T, R, S, n), xdot (P, C, T, R, S, m), J (P, C, T, R, S, m, n),
+    mask (P, C, T, R, S), conditions, targets)`` for P participants, C conditions, T targets, R
+    trials and S samples.
+
+    **Raises:**
+
+    - ``ValueError`` naming a participant that lacks a condition or target, or trials of other sizes
+      n, m.
     """
     parts = _participants(dataset)
     conditions = list(parts[0].keys() if conditions is None else conditions)
