@@ -37,9 +37,17 @@ HUGMP_TASKS = {
 
 @dataclasses.dataclass
 class HugmpSubject:
-    """One HuG-MP subject: ``motions[task]`` a list of ``(repetition, index, q (N, 4) [rad])``
-    (1-based task numbers); ``skipped`` lists ``(repetition, task, reason)`` of cells or motions
-    that were not usable; ``notes`` lists irregular but kept cells (e.g. extra motions)."""
+    """One HuG-MP subject's arm motions (made by :func:`load_hugmp`).
+
+    **Fields:**
+
+    - ``subject``: the name (``"S01"`` … ``"S04"``).
+    - ``motions``: ``motions[task]`` a list of ``(repetition, index, q (N, 4) [rad])`` (1-based task
+      numbers).
+    - ``skipped``: ``(repetition, task, reason)`` of cells or motions that were not usable.
+    - ``notes``: irregular but kept cells (e.g. extra motions).
+    - ``fs``: sampling rate [Hz].
+    """
 
     subject: str
     motions: dict
@@ -71,12 +79,27 @@ def _subject_name(subject) -> str:
 
 
 def load_hugmp(subject, directory=None, *, min_samples: int = 20) -> HugmpSubject:
-    """Load HuG-MP subject ``subject`` (1–4 or 'S01'…'S04') and survive its irregular cells.
+    """Load a HuG-MP subject and survive its irregular cells.
 
-    Empty cells and motions that are not finite 4 × N arrays with N ≥ ``min_samples`` are skipped
-    and reported in ``skipped``; cells holding a number of motions other than the task lists are
-    kept and reported in ``notes``. Angles are returned in radians. Raises ``FileNotFoundError``,
-    or ``ValueError`` naming the file (and the variable ``tasks``) when it is malformed.
+    Empty cells and motions that are not finite 4 × N arrays with N ≥ ``min_samples`` are skipped and
+    reported in ``skipped``; cells holding a number of motions other than the task lists are kept and
+    reported in ``notes``. Angles are returned in radians.
+
+    **Arguments:**
+
+    - ``subject``: 1–4 or ``"S01"`` … ``"S04"``.
+    - ``directory``: the folder of the ``S0i_trajs.mat`` files (default ``$PMPJAX_HUGMP``, else the
+      bundled data set).
+    - ``min_samples``: shortest usable motion (samples).
+
+    **Returns:**
+
+    A :class:`HugmpSubject`.
+
+    **Raises:**
+
+    - ``TypeError``/``ValueError`` naming ``subject`` for a bad subject; ``FileNotFoundError`` for a
+      missing file; ``ValueError`` naming the file (and the variable ``tasks``) when it is malformed.
     """
     name = _subject_name(subject)
     min_samples = check_positive_int("min_samples", min_samples)
@@ -172,12 +195,28 @@ def _check_chain(chain, n=None):
 
 
 def motion_kinematics(q, chain, *, fs: float = 100.0, window: float = 0.15, samples: int | None = 100):
-    """Smoothed joint angles -> ``q`` (S, n), ``qdot`` (S, n), ``xdot`` (S, m), ``J`` (S, m, n).
+    """Smoothed joint angles, joint and task velocities and Jacobians of one motion.
 
-    Savitzky–Golay smoothing and differentiation (cubic, ``window`` [s], ``scipy.signal``) of
-    ``q`` (N, n) [rad] sampled at ``fs`` [Hz]; optionally resampled to ``samples`` equally spaced
-    points (time normalisation, as in the IK paper's 100-sample trials; ``qdot`` stays in rad/s of
-    real time). ``J`` from ``chain`` and ``ẋ = J q̇``.
+    Savitzky–Golay smoothing and differentiation (cubic, ``window`` [s], ``scipy.signal``),
+    optionally resampled to equally spaced points (time normalisation, as in the IK paper's
+    100-sample trials; ``qdot`` stays in rad/s of real time). ``J`` from ``chain`` and ``ẋ = J q̇``.
+
+    **Arguments:**
+
+    - ``q``: (N, n) joint angles [rad].
+    - ``chain``: a pmpjax chain with n joints (e.g. ``pj.ShoulderElbowArm()``).
+    - ``fs``: sampling rate [Hz].
+    - ``window``: smoothing window [s].
+    - ``samples``: resample to this many points (None: keep the N samples).
+
+    **Returns:**
+
+    ``(q, qdot, xdot, J)``: (S, n) [rad], (S, n) [rad/s], (S, m), (S, m, n).
+
+    **Raises:**
+
+    - ``TypeError`` for a non-chain; ``ValueError`` naming the argument for a non-positive ``fs`` or
+      ``window``, or a chain with another number of joints.
     """
     try:
         q = np.asarray(q, dtype=float)
@@ -216,12 +255,28 @@ def _jacobians(chain, q):
 
 
 def hugmp_arrays(subject: HugmpSubject, chain, *, samples: int = 100, window: float = 0.15):
-    """Per task, pad the subject's motions into arrays for estimation.
+    """Per task, pad a subject's motions into arrays for estimation (IK weights).
 
-    Returns ``dict(qdot (6, R, M, S, n), xdot (6, R, M, S, m), J (6, R, M, S, m, n),
-    mask (6, R, M, S), q (6, R, M, S, n))`` with R repetitions and M motions per repetition
-    (missing ones masked; padded Jacobians are [I 0]); smoothing as :func:`motion_kinematics`
-    at the subject's rate, one Jacobian evaluation for all motions.
+    Smoothing as :func:`motion_kinematics` at the subject's rate, one Jacobian evaluation for all
+    motions; missing motions are masked (padded Jacobians are [I 0]).
+
+    **Arguments:**
+
+    - ``subject``: a :class:`HugmpSubject`.
+    - ``chain``: a pmpjax chain with 4 joints (``pj.ShoulderElbowArm()``).
+    - ``samples``: points per motion after resampling.
+    - ``window``: smoothing window [s].
+
+    **Returns:**
+
+    ``dict(qdot (6, R, M, S, n), xdot (6, R, M, S, m), J (6, R, M, S, m, n), mask (6, R, M, S),
+    q (6, R, M, S, n))`` with R repetitions and M motions per repetition.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-subject or non-chain; ``ValueError`` naming the argument for fewer
+      than 2 ``samples``, a chain with another number of joints, or motions too short for the
+      smoothing window.
     """
     if not isinstance(subject, HugmpSubject):
         raise TypeError(f"`subject` must be a HugmpSubject (from pj.load_hugmp), got {type(subject).__name__}")

@@ -168,7 +168,9 @@ def read_joint_angles(path, *, subject: str | None = None, joints=None, max_gap:
                       sample_tol: float = 0.01, motion: tuple[int, int, int] | None = None) -> JointRecording:
     """Read one joint-angle recording (``.mot``, ``.sto``, ``.csv`` or HuG-MP ``.mat``).
 
-    **Arguments** (formats, unit conventions and checks: see the module docstring):
+    Formats, unit conventions and checks: see the module docstring.
+
+    **Arguments:**
 
     - ``path``: the file; its extension picks the format.
     - ``subject``: subject name (default: the file's stem; for HuG-MP the file's subject, ``S01``).
@@ -180,9 +182,13 @@ def read_joint_angles(path, *, subject: str | None = None, joints=None, max_gap:
     - ``sample_tol``: largest relative deviation of a sample interval from the median interval.
     - ``motion``: HuG-MP only, ``(task, repetition, index)`` (1-based), required for ``.mat``.
 
-    **Returns** a :class:`JointRecording`: ``t`` (T,) [s], ``q`` (T, n) [rad].
+    **Returns:**
 
-    **Raises** ``ValueError`` naming the file (and line and column, 1-based) for unreadable or
+    A :class:`JointRecording`: ``t`` (T,) [s], ``q`` (T, n) [rad].
+
+    **Raises:**
+
+    ``ValueError`` naming the file (and line and column, 1-based) for unreadable or
     malformed files, bad time stamps, long gaps and joints not found; ``TypeError`` for arguments
     of the wrong type. A missing file raises an error that is both ``FileNotFoundError`` and
     ``ValueError``.
@@ -593,15 +599,27 @@ def _read_hugmp(path: Path, subject, wanted, motion) -> JointRecording:
 
 
 def write_joint_angles(path, recording: JointRecording, *, in_degrees: bool = True) -> Path:
-    """Write ``recording`` to ``path`` as ``.mot``, ``.sto`` (OpenSim, version-1 header, tab
+    """Write a joint-angle recording as ``.mot``, ``.sto`` (OpenSim, version-1 header, tab
     separated) or ``.csv`` (``# units: deg|rad`` line, then ``time,<joint>,...``).
 
-    ``in_degrees``: write angles in degrees (``inDegrees=yes``; OpenSim's convention) or radians.
     Numbers are written with 17 significant digits, so :func:`read_joint_angles` reads back the
     same radians (to rounding of the degree conversion). To write arrays, build the recording:
     ``JointRecording(subject, name, t (T,) [s], q (T, n) [rad], joint_names)``.
-    Returns the path written. Raises ``TypeError`` for a non-recording, ``ValueError`` for another
-    extension or joint names that the format cannot hold.
+
+    **Arguments:**
+
+    - ``path``: the file; its extension picks the format.
+    - ``recording``: the :class:`JointRecording`.
+    - ``in_degrees``: write angles in degrees (``inDegrees=yes``; OpenSim's convention) or radians.
+
+    **Returns:**
+
+    The path written (``pathlib.Path``).
+
+    **Raises:**
+
+    ``TypeError`` for a non-recording; ``ValueError`` for another extension or joint names that
+    the format cannot hold.
     """
     path = as_path("path", path)
     if not isinstance(recording, JointRecording):
