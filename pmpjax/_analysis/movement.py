@@ -18,10 +18,17 @@ from .._base.validate import as_array
 
 @dataclasses.dataclass(frozen=True)
 class SmoothedPath:
-    """A smoothing spline through samples ``x`` (N, m) at times ``t`` (N,) [s].
+    """A smoothing spline through samples ``x`` (N, m) at times ``t`` (N,) [s] (made by
+    :func:`smooth_path`).
 
-    ``x`` (N, m) smoothed positions, ``xdot`` (N, m) velocities [units/s], ``speed`` (N,) the
-    tangential speed ``|ẋ|``; ``lam`` the smoothing parameter (None: chosen by GCV per component).
+    **Fields:**
+
+    - ``t``: (N,) sample times [s].
+    - ``x``: (N, m) smoothed positions.
+    - ``xdot``: (N, m) velocities [units/s].
+    - ``speed``: (N,) the tangential speed ``|ẋ|``.
+    - ``lam``: the smoothing parameter (None: chosen by GCV per component).
+    - ``spline``: the fitted SciPy spline; ``path(t, nu)`` evaluates it (``nu``-th derivative).
     """
 
     t: np.ndarray
@@ -37,10 +44,23 @@ class SmoothedPath:
 
 
 def smooth_path(t, x, *, lam: float | None = None) -> SmoothedPath:
-    """Smoothing spline of a sampled path (cubic, penalised second derivative).
+    """Smoothing spline of a sampled path (cubic, penalised second derivative; paper Section 2).
 
-    ``t`` (N,) strictly increasing [s]; ``x`` (N, m). ``lam=None`` picks the smoothing of each
-    component by generalised cross-validation; a given ``lam`` is used for all components.
+    **Arguments:**
+
+    - ``t``: (N,) strictly increasing sample times [s], N ≥ 5.
+    - ``x``: (N, m) positions.
+    - ``lam``: the smoothing parameter for all components; ``None`` picks each component's by
+      generalised cross-validation (:func:`gcv_lambda`).
+
+    **Returns:**
+
+    A :class:`SmoothedPath`.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for wrong shapes, fewer than 5 samples, NaN/inf or times
+      that do not increase.
     """
     t = np.asarray(as_array("t", t), dtype=float)
     if t.ndim != 1:
@@ -70,16 +90,30 @@ def smooth_path(t, x, *, lam: float | None = None) -> SmoothedPath:
 def gcv_lambda(t, y, *, joint: bool = False, log10_bounds: tuple[float, float] = (-16.0, 4.0)) -> np.ndarray:
     """Smoothing parameter of a cubic smoothing spline chosen by generalised cross-validation.
 
-    ``t`` (N,) strictly increasing; ``y`` (N,) or (N, m). Returns λ (m,) (or a scalar for 1-D
-    ``y``, or with ``joint=True`` one λ for all components, minimising the sum of their GCV
-    scores: right for a path whose components share one noise level, where a component that
-    barely moves would otherwise ask for a much larger λ) minimising
-    ``GCV(λ) = N |(I − A_λ) y|² / (N − tr A_λ)²`` for the spline that minimises
+    Minimises ``GCV(λ) = N |(I − A_λ) y|² / (N − tr A_λ)²`` for the spline that minimises
     ``Σ (y_i − f(t_i))² + λ ∫ f''²`` — the criterion and the λ of SciPy's
-    ``make_smoothing_spline`` (whose own GCV search is pure Python and costs ≈ 4 ms per sample;
-    pass the result as ``lam``). Here the influence matrix is diagonalised once (Demmler–Reinsch:
+    ``make_smoothing_spline`` (whose own GCV search is pure Python and costs ≈ 4 ms per sample; pass
+    the result as ``lam``). Here the influence matrix is diagonalised once (Demmler–Reinsch:
     ``A_λ = (I + λ K)⁻¹``, ``K = Q R⁻¹ Qᵀ`` of Green & Silverman 1994, §2.1), so every λ costs
     O(N); N³ work for the eigendecomposition, so use windows of up to ~10³ samples.
+
+    **Arguments:**
+
+    - ``t``: (N,) strictly increasing sample times, N ≥ 5.
+    - ``y``: (N,) or (N, m) samples.
+    - ``joint``: one λ for all components, minimising the sum of their GCV scores: right for a path
+      whose components share one noise level, where a component that barely moves would otherwise
+      ask for a much larger λ.
+    - ``log10_bounds``: the search interval of ``log10 λ``.
+
+    **Returns:**
+
+    λ (m,), or a scalar for 1-D ``y`` or with ``joint=True``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for shapes that do not agree, fewer than 5 samples, times
+      that do not increase or bounds that do not increase.
     """
     t = np.asarray(as_array("t", t), dtype=float)
     y = np.asarray(as_array("y", y), dtype=float)
@@ -141,10 +175,22 @@ class _ComponentSplines:
 def segment_by_speed(speed, *, threshold: float = 0.2):
     """Movement onset and offset from a tangential speed profile (paper Section 2).
 
-    ``speed`` (N,); the peak is the global maximum. Start = the first sample before the peak
-    (searching back from it) whose speed is below ``threshold·peak``; end = the first sample after
-    the peak below it. Returns ``(start, end)`` sample indices, or ``None`` for a side where the
-    speed never drops below the threshold (the movement was cut by the recording).
+    The peak is the global maximum. Start = the first sample before the peak (searching back from
+    it) whose speed is below ``threshold·peak``; end = the first sample after the peak below it.
+
+    **Arguments:**
+
+    - ``speed``: (N,) tangential speed, N ≥ 3.
+    - ``threshold``: the level as a fraction of the peak, in (0, 1) (paper: 20 %).
+
+    **Returns:**
+
+    ``(start, end)`` sample indices, each ``None`` for a side where the speed never drops below the
+    threshold (the movement was cut by the recording).
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a wrong shape, NaN/inf or a threshold outside (0, 1).
     """
     speed = np.asarray(speed, dtype=float)
     if speed.ndim != 1 or speed.shape[0] < 3:

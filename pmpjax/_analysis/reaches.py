@@ -172,9 +172,13 @@ def find_movements(recording: JointRecording, chain: Chain, *, smoothing_hz: flo
     - ``rest_smoothing_hz``: cut-off [Hz] of the speed in which rest is looked for, in (0, fs/2).
       Default ``smoothing_hz / 2``.
 
-    **Returns** :class:`Reaches`.
+    **Returns:**
 
-    **Raises** ``TypeError`` for a ``recording`` or ``chain`` of the wrong type; ``ValueError``
+    The :class:`Reaches`.
+
+    **Raises:**
+
+    ``TypeError`` for a ``recording`` or ``chain`` of the wrong type; ``ValueError``
     naming the argument for a chain whose size differs from ``recording.q``'s columns, thresholds
     out of range, a cut-off at or above the Nyquist rate, uneven sampling, or a recording of
     ``2/rest_smoothing_hz`` seconds or less (too short to smooth; 0.67 s by default).

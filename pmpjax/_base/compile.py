@@ -84,9 +84,20 @@ class TopLevelOptionsJit:
 
 
 def fast_compile_jit(fun=None, **kwargs):
-    """``jax.jit`` with :data:`FAST_COMPILE` (merged under explicit ``compiler_options``) for
-    top-level calls; also usable as ``@fast_compile_jit`` or
-    ``@partial(fast_compile_jit, static_argnames=...)``."""
+    """``jax.jit`` with XLA:CPU's legacy loop emitters, for compile-bound kernels.
+
+    ``FAST_COMPILE`` (``{"xla_cpu_use_fusion_emitters": False}``) is merged under explicit
+    ``compiler_options`` for top-level calls. Usable as ``fast_compile_jit(f)``,
+    ``@fast_compile_jit`` or ``@partial(fast_compile_jit, static_argnames=...)``.
+
+    **Arguments:**
+
+    - ``fun``: the function to compile (``None`` when used as ``partial(fast_compile_jit, ...)``).
+    - ``kwargs``: keyword arguments of ``jax.jit`` (``static_argnames``, ``compiler_options``, ...).
+
+    **Returns:**
+
+    The jitted function (or, without ``fun``, a decorator)."""
     if fun is None:
         return functools.partial(fast_compile_jit, **kwargs)
     if not callable(fun):

@@ -278,8 +278,12 @@ def gravity_gradients(mx, q):
 class MjcfChain(Chain):
     """Hand/site position ``x`` (3,) [m] of a MuJoCo model, ``q`` (nq,) joint positions.
 
-    ``MjcfChain(xml_or_model, site)``: ``xml_or_model`` a path, MJCF string, ``mujoco.MjModel``
-    or an object holding one as ``mj_model`` (:class:`pmpjax.CogArm`); ``site`` the site name.
+    **Arguments:**
+
+    - ``xml_or_model``: a path, MJCF string, ``mujoco.MjModel`` or an object holding one as
+      ``mj_model`` (:class:`pmpjax.CogArm`).
+    - ``site``: the name of the site that plays the hand.
+
     Only hinge and slide joints (``nq == nv``). ``joint_names`` (n,) the model's joint names in
     ``qpos`` order (None when a joint is unnamed), so ``pmpjax.read_joint_angles(path,
     joints=chain)`` picks a recording's columns by name.

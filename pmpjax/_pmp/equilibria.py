@@ -191,6 +191,7 @@ def equilibrium_posture(
     """Equilibrium posture of the λ0-PMP: ``argmin ½ (q − q_rest)ᵀ KJ (q − q_rest)`` s.t. ``fk(q) = target``.
 
     **Arguments:**
+
     - ``chain``: a :class:`Chain` (``Wrist``, ``PlanarArm``, ``FunctionChain``, ...).
     - ``KJ``: (..., n, n) SPD joint stiffness [Nm/rad] (only its shape matters, not its scale).
     - ``q_rest``: (..., n) rest posture [rad].
@@ -198,13 +199,19 @@ def equilibrium_posture(
     - ``q_init``: optional (..., n) initial guess (default ``q_rest``; see module docstring).
     - ``tol``: Newton stops when every step is below ``tol (1 + |q|_∞)``; ``max_steps`` bounds the steps.
 
-    Leading axes of all arrays broadcast (targets × subjects, ...). Returns an
-    :class:`Equilibrium` (``.q`` the posture, ``.lam``, ``.status``, ``.converged``,
-    ``.kkt_residual``, ``.steps``). ``.q`` and ``.lam`` are differentiable with respect to
-    ``KJ``, ``q_rest``, ``target`` and the chain's parameters (implicit function theorem; forward
-    and reverse mode); works under ``jit``/``vmap`` (validation then only checks shapes).
+    Leading axes of all arrays broadcast (targets × subjects, ...). ``.q`` and ``.lam`` are
+    differentiable with respect to ``KJ``, ``q_rest``, ``target`` and the chain's parameters
+    (implicit function theorem; forward and reverse mode); works under ``jit``/``vmap``
+    (validation then only checks shapes).
 
-    **Raises:** ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
+    **Returns:**
+
+    An :class:`Equilibrium` (``.q`` the posture, ``.lam``, ``.status``, ``.converged``,
+    ``.kkt_residual``, ``.steps``).
+
+    **Raises:**
+
+    ``TypeError`` for a non-chain, ``ValueError`` naming the argument for wrong shapes,
     NaN/inf, non-SPD ``KJ``, unreachable ``target``, non-positive ``tol``/``max_steps``.
 
     **Compile time:** ≈ 2.4 s per chain for the first call of up to 64 postures and again for the
