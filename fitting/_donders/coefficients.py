@@ -22,8 +22,27 @@ _WRIST_JOINTS = ("PS", "FE", "RUD")
 
 
 def donders_coefficients(params, n: int, trace: float = 4.0):
-    """Coefficients ``c`` (p,) of Donders' law ``N(q)ᵀ(KJ q − b) = 0``: the free entries of ``KJ``
-    (diagonal 0..n−2, then the upper triangle) and ``b = KJ q_rest`` [Nm], from ``params`` (p,)."""
+    """Coefficients of Donders' law ``N(q)ᵀ(KJ q − b) = 0`` from the NIO fit's parameters.
+
+    In these coefficients the equilibrium condition is linear, so ``fitting.fit_donders`` reports
+    identifiability and standard errors in them.
+
+    **Arguments:**
+
+    - ``params``: (p,) the fitted parameters (:func:`parameter_names`: log-stiffness entries, then
+      ``q_rest`` [rad]), ``p = n(n+1)/2 − 1 + n``.
+    - ``n``: number of joints (≥ 2).
+    - ``trace``: the trace of ``KJ`` [Nm/rad].
+
+    **Returns:**
+
+    (p,) coefficients ``c``: the free entries of ``KJ`` (diagonal 0..n−2, then the upper triangle)
+    [Nm/rad] and ``b = KJ q_rest`` [Nm] (:func:`coefficient_names`).
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for ``n < 2`` or ``params`` of the wrong shape.
+    """
     return _donders_coefficients(params_vector("params", params, n, spd_size(n) + n), n, trace)
 
 
@@ -41,22 +60,64 @@ def _labels(chain: Chain):
 
 
 def coefficient_names(chain: Chain) -> tuple[str, ...]:
-    """Names of :func:`donders_coefficients` (``K[i,j]`` and ``b[i]`` with ``b = KJ q_rest``)."""
+    """Names of the coefficients of :func:`donders_coefficients`.
+
+    **Arguments:**
+
+    - ``chain``: the chain (wrist joints are named PS, FE, RUD; other chains' by index).
+
+    **Returns:**
+
+    ``K[i,j]`` for the free entries of ``KJ``, then ``b[i]`` with ``b = KJ q_rest``.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-chain.
+    """
     lab = _labels(chain)
     return tuple(f"K[{lab[i]},{lab[j]}]" for i, j in sym_index(chain.n)) + tuple(f"b[{v}]" for v in lab)
 
 
 def parameter_names(chain: Chain) -> tuple[str, ...]:
-    """Names of the fitted parameters: log-stiffness entries ``logK[i,j]`` then ``q_rest[i]``."""
+    """Names of the NIO fit's parameters.
+
+    **Arguments:**
+
+    - ``chain``: the chain (wrist joints are named PS, FE, RUD; other chains' by index).
+
+    **Returns:**
+
+    The log-stiffness entries ``logK[i,j]``, then ``q_rest[i]``.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-chain.
+    """
     lab = _labels(chain)
     n = chain.n
     return tuple(f"logK[{lab[i]},{lab[j]}]" for i, j in sym_index(n)) + tuple(f"q_rest[{v}]" for v in lab)
 
 
 def predicted_torsion(chain: Wrist, KJ, q_rest, pointing):
-    """Model torsion ``r_x`` [rad] (..., P) of ``(KJ (..., 3, 3), q_rest (..., 3))`` at
-    ``pointing`` (..., P, 2): the first component of the rotation vector of the equilibrium
-    posture (design §3.1, §3.4). Differentiable in ``KJ``, ``q_rest`` and ``pointing``."""
+    """The model's torsion at pointing targets: the first component of the rotation vector of the
+    λ0-PMP's equilibrium posture. Differentiable in ``KJ``, ``q_rest`` and ``pointing``.
+
+    **Arguments:**
+
+    - ``chain``: the :class:`pmpjax.Wrist`.
+    - ``KJ``: (..., 3, 3) SPD joint stiffness [Nm/rad].
+    - ``q_rest``: (..., 3) rest posture [rad].
+    - ``pointing``: (..., P, 2) screen targets [m].
+
+    **Returns:**
+
+    (..., P) torsion ``r_x`` [rad].
+
+    **Raises:**
+
+    - ``TypeError`` for a chain that is not a ``Wrist``; ``ValueError`` as
+      :func:`pmpjax.equilibrium_posture` for bad shapes or values.
+    """
     if not isinstance(chain, Wrist):
         raise TypeError(f"`chain` must be a pmpjax.Wrist, got {type(chain).__name__}")
     q = equilibrium_posture(

@@ -51,11 +51,20 @@ def _fit_status(finite, optimiser_converged, reached=True):
 
 @pytree_dataclass
 class BlendFit:
-    """``alpha`` (..., k) fitted weights (Σα = 1, α > 0); ``hand`` (..., 3) [m] equilibrium hand
-    position; ``error`` (...,) [m] distance to the target; ``status`` (...,) int
-    (:class:`pmpjax.Status`: ``SUCCESSFUL`` = target reached within ``tol``; ``STALLED`` = the
-    optimiser settled on the closest blend of a target outside the region the primitives span;
-    ``MAX_STEPS``; ``NONFINITE``); ``converged`` = ``status == 0``; ``steps`` (...,)."""
+    """Fitted primitive blend weights (the result of :func:`fit_blend_weights`).
+
+    **Fields:**
+
+    - ``alpha``: (..., k) fitted weights (Σα = 1, α > 0).
+    - ``hand``: (..., 3) equilibrium hand position [m].
+    - ``error``: (...,) distance to the target [m].
+    - ``status``: (...,) int :class:`pmpjax.Status`: ``SUCCESSFUL`` = target reached within ``tol``;
+      ``STALLED`` = the optimiser settled on the closest blend of a target outside the region the
+      primitives span; ``MAX_STEPS``; ``NONFINITE``.
+    - ``steps``: (...,) Levenberg–Marquardt iterations.
+
+    ``converged`` = ``status == 0``.
+    """
 
     alpha: jax.Array
     hand: jax.Array
@@ -69,11 +78,29 @@ class BlendFit:
 
 
 def fit_blend_weights(arm: CogArm, P, target, *, K=None, tol: float = 1e-6, max_steps: int = 50) -> BlendFit:
-    """Blend weights ``α`` so that the arm's equilibrium under gravity for ``Σ α_i P_i`` puts the
-    hand at ``target`` (..., 3) [m]. ``P`` (k, n) primitives [rad]; ``K`` (n,) stiffness.
+    """Blend weights ``α`` whose equilibrium under gravity puts the hand at a target.
 
     ``α = softmax(z, 0)`` keeps the blend a superposition (Σα = 1, α > 0), so targets outside the
     region the primitives span are reported with status ``STALLED`` and the closest blend.
+    Levenberg–Marquardt through :func:`pmpjax.arm_equilibrium`.
+
+    **Arguments:**
+
+    - ``arm``: a :class:`pmpjax.CogArm`.
+    - ``P``: (k, n) primitives [rad], k ≥ 2.
+    - ``target``: (..., 3) hand targets [m].
+    - ``K``: (n,) joint stiffness [Nm/rad] (default the arm's).
+    - ``tol``: the largest distance to the target that counts as reached [m].
+    - ``max_steps``: Levenberg–Marquardt iterations at most.
+
+    **Returns:**
+
+    A :class:`BlendFit`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm; ``ValueError`` naming the argument for wrong shapes, NaN/inf,
+      non-positive ``K``, ``tol`` or ``max_steps``.
     """
     check_arm(arm)
     n = arm.n
@@ -118,9 +145,17 @@ def _fit_blend(mx, site_id, P, K, targets, max_steps):
 
 @pytree_dataclass
 class StiffnessFit:
-    """``K`` (..., n) [Nm/rad] fitted joint stiffness; ``rms`` (...,) [rad] RMS posture residual;
-    ``status`` (...,) int (:class:`pmpjax.Status`: ``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``);
-    ``converged`` = ``status == 0``; ``steps`` (...,)."""
+    """Fitted joint stiffness (the result of :func:`fit_stiffness`).
+
+    **Fields:**
+
+    - ``K``: (..., n) fitted joint stiffness [Nm/rad].
+    - ``rms``: (...,) RMS posture residual [rad].
+    - ``status``: (...,) int :class:`pmpjax.Status`: ``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``.
+    - ``steps``: (...,) Levenberg–Marquardt iterations.
+
+    ``converged`` = ``status == 0``.
+    """
 
     K: jax.Array
     rms: jax.Array
@@ -133,11 +168,27 @@ class StiffnessFit:
 
 
 def fit_stiffness(arm: CogArm, q_set, q_observed, *, K0=None, max_steps: int = 50) -> StiffnessFit:
-    """Joint stiffness ``K`` (n,) from the observed gravity sag: static postures ``q_observed``
-    (..., P, n) [rad] held with set-points ``q_set`` (P, n). ``K = exp(κ)`` keeps it positive.
+    """Joint stiffness from the observed gravity sag of static postures.
 
-    Use postures that load every joint (the gravity torque on a joint must be non-zero in some
-    posture, or its stiffness is unidentifiable). Leading axes of ``q_observed`` are subjects.
+    ``K = exp(κ)`` keeps it positive. Use postures that load every joint (the gravity torque on a
+    joint must be non-zero in some posture, or its stiffness is unidentifiable).
+
+    **Arguments:**
+
+    - ``arm``: a :class:`pmpjax.CogArm`.
+    - ``q_set``: (P, n) set-points [rad] the postures were held with.
+    - ``q_observed``: (..., P, n) observed static postures [rad]; leading axes are subjects.
+    - ``K0``: (n,) starting stiffness [Nm/rad] (default the arm's).
+    - ``max_steps``: Levenberg–Marquardt iterations at most.
+
+    **Returns:**
+
+    A :class:`StiffnessFit` with leading axes ``(...)``.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-arm; ``ValueError`` naming the argument for wrong shapes, NaN/inf,
+      non-positive ``K0`` or ``max_steps``.
     """
     check_arm(arm)
     n = arm.n

@@ -13,8 +13,23 @@ from pmpjax.internal import check_positive_int
 
 
 def grid(**axes) -> dict[str, np.ndarray]:
-    """Full factorial grid: ``grid(a=[1, 2], b=[10, 20, 30])`` -> ``{a: (6,), b: (6,)}``, rows in
-    C order (the first axis varies slowest), so outputs reshape to ``(len(a), len(b), ...)``."""
+    """Full factorial grid of parameter values, one row per combination.
+
+    ``grid(a=[1, 2], b=[10, 20, 30])`` -> ``{a: (6,), b: (6,)}``; rows in C order (the first axis
+    varies slowest), so outputs reshape to ``(len(a), len(b), ...)``.
+
+    **Arguments:**
+
+    - ``axes``: ``name=values``, each a non-empty 1-D sequence of finite numbers.
+
+    **Returns:**
+
+    ``{name: (N,) array}`` with N the product of the axes' lengths.
+
+    **Raises:**
+
+    - ``ValueError`` naming the axis for no axes, an empty or non-1-D axis, or NaN/inf.
+    """
     if not axes:
         raise ValueError("`grid` needs at least one axis, e.g. grid(ratio=[1, 2, 4])")
     vals = {}
@@ -46,8 +61,23 @@ def _check_bounds(bounds) -> tuple[list[str], np.ndarray, np.ndarray]:
 
 
 def latin_hypercube(bounds, n: int, *, seed: int = 0) -> dict[str, np.ndarray]:
-    """``n`` Latin-hypercube samples (``scipy.stats.qmc.LatinHypercube``, seeded) of the box
-    ``bounds = {name: (low, high)}``: every axis split into n equal strata, one sample in each."""
+    """Latin-hypercube samples of a box (``scipy.stats.qmc.LatinHypercube``, seeded): every axis
+    split into n equal strata, one sample in each.
+
+    **Arguments:**
+
+    - ``bounds``: ``{name: (low, high)}``, finite with ``low < high``.
+    - ``n``: number of samples.
+    - ``seed``: the seed.
+
+    **Returns:**
+
+    ``{name: (n,) array}``.
+
+    **Raises:**
+
+    - ``TypeError``/``ValueError`` naming the argument for bad bounds or a non-positive ``n``.
+    """
     from scipy.stats import qmc
 
     names, lo, hi = _check_bounds(bounds)
@@ -58,9 +88,24 @@ def latin_hypercube(bounds, n: int, *, seed: int = 0) -> dict[str, np.ndarray]:
 
 
 def sobol(bounds, n: int, *, seed: int = 0, scramble: bool = True) -> dict[str, np.ndarray]:
-    """``n`` Sobol' points (``scipy.stats.qmc.Sobol``, scrambled and seeded) in the box
-    ``bounds = {name: (low, high)}``. ``n`` must be a power of two (the sequence's balance
-    properties hold only for those)."""
+    """Sobol' points in a box (``scipy.stats.qmc.Sobol``, scrambled and seeded).
+
+    **Arguments:**
+
+    - ``bounds``: ``{name: (low, high)}``, finite with ``low < high``.
+    - ``n``: number of points, a power of two (the sequence's balance properties hold only for those).
+    - ``seed``: the seed of the scrambling.
+    - ``scramble``: scramble the sequence.
+
+    **Returns:**
+
+    ``{name: (n,) array}``.
+
+    **Raises:**
+
+    - ``TypeError``/``ValueError`` naming the argument for bad bounds or an ``n`` that is not a
+      positive power of two.
+    """
     from scipy.stats import qmc
 
     names, lo, hi = _check_bounds(bounds)
@@ -75,11 +120,22 @@ def sobol(bounds, n: int, *, seed: int = 0, scramble: bool = True) -> dict[str, 
 
 def params_from_csv(path, *, labels: Sequence[str] = ()) -> dict[str, np.ndarray]:
     """A parameter table from a CSV file with a header line (``#`` lines are comments), e.g. one
-    row per subject. Every column is numeric (float64) except those named in ``labels`` (kept
-    as str, e.g. ``labels=("subject",)``, and not passed to ``fn``).
+    row per subject.
 
-    **Raises** ``ValueError`` naming the file, line and column for a missing/duplicate header,
-    a row of the wrong length, an empty or non-numeric field, NaN/inf, or no data rows.
+    **Arguments:**
+
+    - ``path``: the CSV file.
+    - ``labels``: columns kept as str (e.g. ``labels=("subject",)``), not passed to the swept
+      function; every other column is numeric (float64).
+
+    **Returns:**
+
+    ``{column: (N,) array}``, one row per data line.
+
+    **Raises:**
+
+    - ``ValueError`` naming the file, line and column for a missing/duplicate header, a row of the
+      wrong length, an empty or non-numeric field, NaN/inf, or no data rows.
     """
     path = Path(path)
     try:
