@@ -240,14 +240,17 @@ def fit_donders(
     """Fit ``KJ`` (SPD, trace ``trace``) and ``q_rest`` per subject to steady postures (NIO).
 
     **Arguments:**
+
     - ``chain``: the chain (``pmpjax.Wrist()`` for Donders' law of the wrist).
     - ``pointing``: (S, N, m) or (N, m) observed task positions (screen points [m]).
     - ``postures``: (S, N, n) or (N, n) observed joint angles [rad] (from quaternions with
       ``pmpjax.joint_angles_from_quat``).
     - ``mask``: optional (S, N) bool of valid samples (ragged subjects; padded entries ignored).
     - ``n_starts``: LM starts per subject (start 0 isotropic at the mean posture; the rest
-      seeded random perturbations); the lowest finite loss wins.
+      random perturbations drawn with ``seed``); the lowest finite loss wins.
+    - ``seed``: seed of the random starts.
     - ``residual``: "torsion" (wrist default) or "joint" (any chain) — see module docstring.
+    - ``trace``: the fixed trace of ``KJ`` [Nm/rad] (only the eigenvalue ratios shape Donders' law).
     - ``max_steps``: LM iterations per start; ``rcond``: identifiability threshold on singular
       values relative to the largest; ``tol``: equilibrium Newton tolerance.
     - ``chunk_size``: subjects per compiled call (default: 8 for up to 8 subjects, else 16 —
@@ -257,9 +260,15 @@ def fit_donders(
 
     All subjects of a chunk, and all their starts, run in one ``jit``+``vmap`` call. A subject
     whose fit fails is reported with ``converged = False`` and a ``status`` code; the others are
-    unaffected. Returns a :class:`DondersFit`.
+    unaffected.
 
-    **Raises:** ``TypeError``/``ValueError`` naming the argument for a non-chain, wrong shapes,
+    **Returns:**
+
+    A :class:`DondersFit`.
+
+    **Raises:**
+
+    ``TypeError``/``ValueError`` naming the argument for a non-chain, wrong shapes,
     NaN/inf among the valid samples, unreachable pointing, bad options.
 
     **Compile time:** ≈ 13 s on first use (the NIO residual, its forward-mode Jacobian through the
@@ -360,11 +369,10 @@ def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: in
     """The paper's own route to ``KJ`` and ``q_rest`` (Tommasino & Campolo 2016, 2017 Section 2):
     NIO on the subject's *average* Donders surface instead of on every sample.
 
-    Per subject the quadratic Donders surface (``pmpjax.fit_donders_surface``, design §3.4) is
+    Per subject the quadratic Donders surface (``pmpjax.fit_donders_surface``) is
     fitted to the rotation vectors of the observed postures ("an extreme down-sampling of
     experimental data"); ``grid × grid`` postures on that surface, spanning the observed range of
-    ``(r_y, r_z)``, then go to :func:`fit_donders` (``**options`` are passed on). Arguments as in
-    :func:`fit_donders` (``postures`` (S, N, 3) joint angles [rad], ``pointing`` (S, N, 2) [m]).
+    ``(r_y, r_z)``, then go to :func:`fit_donders`.
 
     The surface postures are noise-free, so the returned ``loss``/``rms`` measure how far the
     λ0-PMP's own surface is from a quadratic, and its standard errors do not describe the data:
@@ -374,6 +382,24 @@ def fit_average_donders(chain: Wrist, pointing, postures, *, mask=None, grid: in
     until ``max_steps`` (status MAX_STEPS), and may end with ``q_rest`` far from the postures: the
     samples route (:func:`fit_donders`), where noise and the data's spread pin the parameters
     down, is the better-posed of the two (tests/test_pointing.py compares them).
+
+    **Arguments:**
+
+    - ``chain``: the :class:`pmpjax.Wrist`.
+    - ``pointing``: (S, N, 2) observed screen points [m].
+    - ``postures``: (S, N, 3) observed joint angles [rad].
+    - ``mask``: optional (S, N) bool valid samples.
+    - ``grid``: surface postures per axis (``grid × grid`` per subject).
+    - ``options``: passed on to :func:`fit_donders` (``n_starts``, ``max_steps``, ...).
+
+    **Returns:**
+
+    A :class:`DondersFit`.
+
+    **Raises:**
+
+    ``TypeError`` for a chain that is not a ``Wrist``; ``ValueError`` for ``grid < 3``; otherwise as
+    :func:`fit_donders`.
     """
     from pmpjax import evaluate_surface, fit_donders_surface, joint_angles_from_matrix, matrix_from_rotvec
 

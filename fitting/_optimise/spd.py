@@ -41,7 +41,25 @@ def log_stiffness(s, n):
 
 
 def stiffness_from_params(s, n: int, trace: float = 4.0):
-    """``KJ`` (n, n) SPD with ``tr KJ = trace`` from ``s`` (n(n+1)/2 − 1,): ``t expm(S)/tr expm(S)``."""
+    """An SPD stiffness of fixed trace from its log parameters: ``KJ = t expm(S)/tr expm(S)``.
+
+    ``S`` is the symmetric matrix whose free entries are ``s`` (the last diagonal entry makes
+    ``tr S = 0``); every ``s`` gives an SPD ``KJ`` with trace ``t``.
+
+    **Arguments:**
+
+    - ``s``: (n(n+1)/2 − 1,) log-stiffness parameters.
+    - ``n``: number of joints (≥ 2).
+    - ``trace``: ``t``, the trace of ``KJ`` [Nm/rad].
+
+    **Returns:**
+
+    (n, n) SPD ``KJ`` [Nm/rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for ``n < 2`` or ``s`` of the wrong shape.
+    """
     return stiffness_matrix(params_vector("s", s, n, spd_size(n)), n, trace)
 
 
@@ -77,8 +95,21 @@ def _expm_sym(S, squarings: int = 6, order: int = 10):
 
 
 def params_from_stiffness(KJ):
-    """Inverse of :func:`stiffness_from_params` (trace is dropped): ``S = log KJ − tr(log KJ)/n I``.
-    ``KJ`` (..., n, n) SPD; returns (..., n(n+1)/2 − 1) (NumPy)."""
+    """The inverse of :func:`stiffness_from_params` (the trace is dropped):
+    ``S = log KJ − tr(log KJ)/n I``.
+
+    **Arguments:**
+
+    - ``KJ``: (..., n, n) SPD stiffness.
+
+    **Returns:**
+
+    (..., n(n+1)/2 − 1) log-stiffness parameters (NumPy).
+
+    **Raises:**
+
+    - ``ValueError`` naming ``KJ`` for a wrong shape, NaN/inf or a matrix that is not SPD.
+    """
     KJ = np.asarray(as_array("KJ", KJ, tail=(None, None)), dtype=float)
     check_spd("KJ", KJ)
     n = KJ.shape[-1]

@@ -56,8 +56,26 @@ def _band(mean, sd):
 
 
 def plot_pointing_paths(analysis, prediction=None, *, subject=0, alpha: float = 0.05, fig=None):
-    """Figure 5: mean outbound (blue) and inbound (red) paths with sd bands, thick where ``A_net``
-    differs from 0 (t-test, ``alpha``), a star at targets with hysteresis, the model dashed."""
+    """The paper's Figure 5: mean outbound (blue) and inbound (red) paths with sd bands, thick where
+    ``A_net`` differs from 0 (t-test), a star at targets with hysteresis, the model dashed.
+
+    **Arguments:**
+
+    - ``analysis``: the :class:`PointingAnalysis` (:func:`analyze_pointing`).
+    - ``prediction``: optional :class:`PointingPrediction` of the same subjects (the model, dashed).
+    - ``subject``: a subject name or index.
+    - ``alpha``: significance level of the t-tests, in (0, 1).
+    - ``fig``: a matplotlib figure to draw into (default a new one).
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-analysis or non-prediction; ``ValueError`` naming the argument for a
+      prediction of other subjects, an unknown subject or ``alpha`` outside (0, 1).
+    """
     s = _check(analysis, prediction, subject, alpha)
     fig = _figure(fig, figsize=(5.5, 5.5))
     ax = fig.add_subplot(1, 1, 1)
@@ -90,8 +108,26 @@ def plot_pointing_paths(analysis, prediction=None, *, subject=0, alpha: float = 
 
 
 def plot_pointing_curvature(analysis, prediction=None, *, subject=0, alpha: float = 0.05, fig=None):
-    """Figure 6: measured ``A_net`` (mean ± sd) per movement beside the model's, a star where they
-    differ (one-sample t-test of the measured areas against the model's value, ``alpha``)."""
+    """The paper's Figure 6: measured ``A_net`` (mean ± sd) per movement beside the model's, a star
+    where they differ (one-sample t-test of the measured areas against the model's value).
+
+    **Arguments:**
+
+    - ``analysis``: the :class:`PointingAnalysis` (:func:`analyze_pointing`).
+    - ``prediction``: optional :class:`PointingPrediction` of the same subjects (the model, dashed).
+    - ``subject``: a subject name or index.
+    - ``alpha``: significance level of the t-tests, in (0, 1).
+    - ``fig``: a matplotlib figure to draw into (default a new one).
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-analysis or non-prediction; ``ValueError`` naming the argument for a
+      prediction of other subjects, an unknown subject or ``alpha`` outside (0, 1).
+    """
     s = _check(analysis, prediction, subject, alpha)
     fig = _figure(fig, figsize=(9, 3.5))
     ax = fig.add_subplot(1, 1, 1)
@@ -117,8 +153,27 @@ def plot_pointing_curvature(analysis, prediction=None, *, subject=0, alpha: floa
 
 def plot_pointing_joints(analysis, prediction=None, *, subject=0, labels=("out-E", "in-E", "out-W", "in-W"),
                          alpha: float = 0.05, fig=None):
-    """Figure 7: joint trajectories (PS, FE, RUD; mean ± sd [deg] over the movement's duration)
-    of the movements ``labels``, the model dashed."""
+    """The paper's Figure 7: joint trajectories (PS, FE, RUD; mean ± sd [deg] over the movement's
+    duration) of some movements, the model dashed.
+
+    **Arguments:**
+
+    - ``analysis``: the :class:`PointingAnalysis` (:func:`analyze_pointing`).
+    - ``prediction``: optional :class:`PointingPrediction` of the same subjects (the model, dashed).
+    - ``subject``: a subject name or index.
+    - ``alpha``: significance level of the t-tests, in (0, 1).
+    - ``fig``: a matplotlib figure to draw into (default a new one).
+    - ``labels``: the movements to draw (of ``analysis.labels``).
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-analysis or non-prediction; ``ValueError`` naming the argument for a
+      prediction of other subjects, an unknown subject or ``alpha`` outside (0, 1), or labels that name no movement.
+    """
     s = _check(analysis, prediction, subject, alpha)
     labels = tuple(labels)
     unknown = [lab for lab in labels if lab not in analysis.labels]
@@ -149,8 +204,26 @@ def plot_pointing_joints(analysis, prediction=None, *, subject=0, labels=("out-E
 
 
 def plot_pointing_speed(analysis, prediction=None, *, subject=0, alpha: float = 0.05, fig=None):
-    """Figure 8: tangential speed profiles (mean ± sd [m/s] over the movement's duration) of all 16
-    movements (outbound top row, inbound bottom), the model dashed."""
+    """The paper's Figure 8: tangential speed profiles (mean ± sd [m/s] over the movement's
+    duration) of all 16 movements (outbound top row, inbound bottom), the model dashed.
+
+    **Arguments:**
+
+    - ``analysis``: the :class:`PointingAnalysis` (:func:`analyze_pointing`).
+    - ``prediction``: optional :class:`PointingPrediction` of the same subjects (the model, dashed).
+    - ``subject``: a subject name or index.
+    - ``alpha``: significance level of the t-tests, in (0, 1).
+    - ``fig``: a matplotlib figure to draw into (default a new one).
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-analysis or non-prediction; ``ValueError`` naming the argument for a
+      prediction of other subjects, an unknown subject or ``alpha`` outside (0, 1).
+    """
     s = _check(analysis, prediction, subject, alpha)
     fig = _figure(fig, figsize=(14, 3.8))
     axes = fig.subplots(2, len(DIRECTIONS), sharex=True, sharey=True)
