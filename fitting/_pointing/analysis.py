@@ -408,9 +408,16 @@ def analyze_pointing(recording: PointingRecording, *, n_samples: int = 20, thres
     0.2); ``iqr`` exclusion distance from the subject's median in inter-quartile ranges (paper: 2;
     ``np.inf`` keeps every movement).
 
-    Returns a :class:`PointingAnalysis`. Raises ``TypeError``/``ValueError`` naming the argument
-    for a non-recording or bad options, and ``ValueError`` naming the file when no trial is valid;
-    invalid trials and movements are skipped (warning) and listed in ``excluded``.
+    Invalid trials and movements are skipped (warning) and listed in ``excluded``.
+
+    **Returns:**
+
+    A :class:`PointingAnalysis`.
+
+    **Raises:**
+
+    ``TypeError``/``ValueError`` naming the argument for a non-recording or bad options, and
+    ``ValueError`` naming the file when no trial is valid.
     """
     if not isinstance(recording, PointingRecording):
         raise TypeError(f"`recording` must be a pmpjax.PointingRecording (pmpjax.read_pointing), got "

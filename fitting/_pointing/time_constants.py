@@ -196,7 +196,15 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     subject; ``max_steps``: LM iterations per item.
 
     Starts at the paper's ``τ = τ0 = T/5`` (T: the subject's mean duration, or the movement's).
-    Returns a :class:`TimeConstantFit`; items without data get status TOO_FEW_DATA and NaN.
+
+    **Returns:**
+
+    A :class:`TimeConstantFit`; items without data get status ``TOO_FEW_DATA`` and NaN.
+
+    **Raises:**
+
+    ``TypeError`` for a non-analysis; ``ValueError`` naming the argument for ``KJ``/``q_rest`` of
+    the wrong shape or a ``KJ`` that is not SPD, or a non-positive ``max_steps``.
 
     **Compile time:** ≈ 14 s on first use on an idle 2-core CPU (LM through ``simulate`` of every
     movement with forward-mode derivatives: ≈ 9 s tracing, the rest XLA); ≈ 0.6 s to run 2 subjects
@@ -359,7 +367,16 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
     residual of :func:`fit_time_constants` (per-subject τ0, τ), each block divided by its noise
     scale: the thickness of the subject's Donders surface, and the standard error of the mean
     normalised paths. ``KJ`` keeps trace 4 (log-stiffness parameters as in ``fit_donders``).
-    Returns a :class:`PointingModelFit`.
+
+    **Returns:**
+
+    A :class:`PointingModelFit`.
+
+    **Raises:**
+
+    ``TypeError`` for a non-analysis or a ``donders`` that is not a ``pmpjax.DondersRecording``;
+    ``ValueError`` naming the argument for subjects without a Donders session, ``KJ``/``q_rest``
+    of the wrong shape or not SPD, non-positive time constants or ``max_steps``.
     """
     check_positive_int("max_steps", max_steps)
     theta0, jdata, opts, has, Np = _joint_inputs(analysis, donders, KJ, q_rest, tau0, tau)
