@@ -102,10 +102,23 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
 
     Each reach (found as in :func:`fit_movements`) is simulated from its recorded start posture to
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
-    step count. **Arguments:** ``fit`` a :class:`MovementFit`; ``recordings`` JointRecordings of
-    subjects in the fit (others are reported in ``problems``). **Returns:** a
-    :class:`MovementPrediction`. **Raises:** ``TypeError`` for a non-fit, ``ValueError`` when no
-    reach can be predicted.
+    step count.
+
+    **Arguments:**
+
+    - ``fit``: a :class:`MovementFit` (:func:`fit_movements`).
+    - ``recordings``: ``pmpjax.JointRecording`` of subjects in the fit (others are reported in
+      ``problems``).
+    - ``find_options``: keyword options of ``pmpjax.find_movements`` for finding the reaches
+      (default: its defaults).
+
+    **Returns:**
+
+    A :class:`MovementPrediction`.
+
+    **Raises:**
+
+    ``TypeError`` for a non-fit; ``ValueError`` when no reach can be predicted.
     """
     if not isinstance(fit, MovementFit):
         raise TypeError(f"`fit` must be a fitting.MovementFit (fitting.fit_movements), got {type(fit).__name__}")

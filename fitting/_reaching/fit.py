@@ -392,6 +392,7 @@ def fit_reaching(
     """Fit the λ0-PMP per HuG-MP subject to the recorded movements of repetitions ``reps``.
 
     **Arguments:**
+
     - ``subjects``: HuG-MP subject numbers (1–4 bundled) or names ('S01'); ``directory``: folder of
       ``S0i_trajs.mat`` files (default: the bundled ones; as ``pmpjax.load_hugmp``).
     - ``reps``: repetitions to fit (the others are never read for the fit); ``tasks``: task numbers.
@@ -423,7 +424,15 @@ def fit_reaching(
     All subjects are fitted in one compiled call (see the module docstring). A subject whose file
     is missing or malformed, or that has no usable motion, is reported in ``problems`` with
     ``status`` ``INVALID_INPUT`` / ``TOO_FEW_DATA`` and NaN parameters (and a warning); the others
-    go on. **Raises:** ``TypeError``/``ValueError`` naming the argument for bad options, and
+    go on.
+
+    **Returns:**
+
+    A :class:`ReachingFit`.
+
+    **Raises:**
+
+    ``TypeError``/``ValueError`` naming the argument for bad options, and
     ``ValueError`` when no subject can be fitted (with every subject's reason).
     """
     if isinstance(subjects, int | np.integer | str):

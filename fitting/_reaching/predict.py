@@ -207,7 +207,18 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     docstring. ``reps`` must not overlap ``fit.reps``. Subjects that were not fitted, or whose
     held-out motions cannot be loaded, are reported in ``problems`` and left out.
 
-    **Raises:** ``TypeError`` for a non-:class:`ReachingFit`, ``ValueError`` for bad or overlapping
+    **Arguments:**
+
+    - ``fit``: the :class:`ReachingFit` (:func:`fit_reaching`).
+    - ``reps``: the held-out repetitions (HuG-MP has 10).
+
+    **Returns:**
+
+    A :class:`ReachingPrediction`.
+
+    **Raises:**
+
+    ``TypeError`` for a non-:class:`ReachingFit`, ``ValueError`` for bad or overlapping
     ``reps`` and when no held-out motion is usable.
     """
     if not isinstance(fit, ReachingFit):

@@ -234,6 +234,7 @@ def sweep(
     """Evaluate ``fn`` on every parameter row, in chunks, resumably; equals ``jax.vmap(fn)(params)``.
 
     **Arguments:**
+
     - ``fn``: a jit-able function of one parameter row (``{name: array}``, the numeric columns of
       ``params`` without their row axis) returning a pytree of arrays. An integer leaf named
       ``status`` holds :class:`pmpjax.Status` codes (non-zero marks the row failed).
@@ -253,7 +254,13 @@ def sweep(
     Each chunk runs ``jit(vmap(fn))`` compiled with ``pmpjax.internal.FAST_COMPILE`` (XLA:CPU's
     legacy loop emitters: rows that fit or simulate compile 15–55 % faster, pmpjax/_base/compile.py).
 
-    Returns a :class:`SweepResult`. **Raises** (before any work): ``TypeError``/``ValueError`` for
+    **Returns:**
+
+    A :class:`SweepResult`.
+
+    **Raises:**
+
+    Before any work: ``TypeError``/``ValueError`` for
     a non-callable or non-jit-able ``fn``, params of unequal lengths, NaN/inf or non-numeric
     params, a bad ``chunk_size``/``devices``/``client``, or an ``out`` that holds another sweep's
     store or unrelated files.
