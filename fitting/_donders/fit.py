@@ -61,14 +61,15 @@ from .coefficients import coefficient_names, donders_coefficients, parameter_nam
 class DondersFit:
     """Per-subject NIO results (leading axis S = subjects; p parameters; numpy arrays).
 
-    ``KJ`` (S, n, n) [Nm/rad], ``q_rest`` (S, n) [rad]; ``params`` (S, p) (see
-    :func:`parameter_names`); ``loss`` (S,) ½ Σ r²; ``rms`` (S,) RMS residual [rad];
+    ``KJ`` (S, n, n) [Nm/rad], ``q_rest`` (S, n) [rad]; ``params`` (S, p) named by
+    ``param_names`` (:func:`parameter_names`); ``loss`` (S,) ½ Σ r²; ``rms`` (S,) RMS residual [rad];
     ``steps`` (S,) LM iterations of the best start; ``status`` (S,) int :class:`pmpjax.Status`
     (``SUCCESSFUL``, ``MAX_STEPS``, ``NONFINITE``: no start had a finite loss or every equilibrium
     failed, ``TOO_FEW_DATA``: no more valid samples than parameters); ``converged`` (S,) bool
     = ``status == SUCCESSFUL``; ``n_samples`` (S,); ``stderr`` (S, p), ``cov`` (S, p, p); ``KJ_stderr``
     (S, n, n), ``q_rest_stderr`` (S, n) (delta method); ``coefficients`` (S, p) of Donders' law
-    (:func:`donders_coefficients`), ``coefficient_stderr`` (S, p), ``coefficient_cov`` (S, p, p);
+    (:func:`donders_coefficients`) named by ``coef_names``, ``coefficient_stderr`` (S, p),
+    ``coefficient_cov`` (S, p, p);
     ``singular_values`` (S, p) of the residual Jacobian with respect to the coefficients;
     ``directions`` (S, p, p), row k = the combination of coefficients of singular value k;
     ``identifiable`` (S, p) bool per direction (``s_k > rcond s_max``); ``direction_stderr``

@@ -252,7 +252,7 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
 class PointingModelFit:
     """Result of :func:`fit_pointing_model` (numpy arrays, S subjects).
 
-    ``KJ`` (S, 3, 3) [Nm/rad] (trace 4), ``q_rest`` (S, 3) [rad], ``tau0``, ``tau`` (S,) [s];
+    ``subjects`` (S,) names; ``KJ`` (S, 3, 3) [Nm/rad] (trace 4), ``q_rest`` (S, 3) [rad], ``tau0``, ``tau`` (S,) [s];
     ``params`` (S, 10) the fitted vector (log-stiffness, q_rest, log τ0, log τ; ``param_names``),
     ``stderr`` (S, 10) its Gauss–Newton standard errors; ``loss`` (S,) ½|r|² of the weighted
     residual; ``torsion_rms`` (S,) [rad] of the Donders postures; ``path_rms`` (S,) RMS of the
@@ -361,7 +361,7 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
     Donders sessions (``pmpjax.DondersRecording``, matched by subject name); ``KJ`` (S, 3, 3),
     ``q_rest`` (S, 3) starting values in the order of ``analysis.subjects`` (e.g.
     ``fitting.fit_donders``); ``tau0``, ``tau``: starting values [s], scalar or (S,) (default
-    T̄/5; e.g. ``fitting.fit_time_constants``).
+    T̄/5; e.g. ``fitting.fit_time_constants``); ``max_steps``: LM iterations per subject.
 
     The residual stacks the torsion of every Donders posture (as ``fit_donders``) and the path
     residual of :func:`fit_time_constants` (per-subject τ0, τ), each block divided by its noise

@@ -277,6 +277,8 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
 class ReachingFit:
     """Per-subject λ0-PMP fits to HuG-MP movements (leading axis S = subjects, NumPy arrays).
 
+    ``subjects`` (S,) names; ``model``, ``damping``, ``time_constants``, ``reps``, ``tasks`` and
+    ``directory``: the options of :func:`fit_reaching` that made it;
     ``KJ`` (S, 4, 4) [Nm/rad], trace 4; ``q_rest`` (S, 4) [rad]; ``W`` (S, 4, 4) damping per unit
     intrinsic time constant, trace 4 (the damping of a motion is ``τ0 · W``; ``W = KJ`` under
     ``damping="tau0_KJ"``); time constants as fractions of the movement duration: ``tau_over_T``,

@@ -46,7 +46,8 @@ _TRACER_ERRORS = (
 class SweepResult:
     """Outputs of a sweep over N parameter rows, in parameter-row order.
 
-    ``outputs``: the pytree ``jax.vmap(fn)(params)`` returns, as NumPy arrays (N, ...);
+    ``outputs``: the pytree ``jax.vmap(fn)(params)`` returns, as NumPy arrays (N, ...), and
+    ``leaf_names`` the names of its leaves;
     ``params``: ``{name: (N, ...)}`` the parameter table (label columns included); ``status``
     (N,) int, a :class:`pmpjax.Status` code per row (0 ok; ``NONFINITE`` for NaN/inf outputs;
     otherwise the first non-zero code of the ``status`` output leaf); ``failed`` (N,) bool;

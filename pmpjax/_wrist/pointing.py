@@ -558,6 +558,7 @@ def synthetic_pointing_experiment(
     - ``subjects``: Table 1–2 subjects (names or numbers, default all six: ``paper_subjects``).
     - ``T``: mean movement durations T_sj [s]: scalar, (S,) or (S, 16); default per subject
       uniform in [0.35, 0.55] s times a per-movement factor ``exp(target_spread·N(0, 1))``.
+    - ``target_spread``: log-sd of that per-movement factor.
     - ``tau0_ratio``, ``tau_ratio``: τ0 = ratio·T_sj, τ = ratio·T_sj (scalar, (S,) or (S, 16));
       the paper's heuristic τ = τ0 = T/5 by default.
     - trial-to-trial variability, per movement: ``duration_jitter`` (log-sd of the movement's
