@@ -14,9 +14,25 @@ from pmpjax.internal import csv_floats, input_file, open_npz, read_text_file
 
 
 def read_ik_file(path) -> dict:
-    """Arrays ``qdot (B, K, n)``, ``xdot (B, K, m)``, ``J (B, K, m, n)``, ``mask (B, K)``, ``labels``
-    from the paper's ``.mat`` layout, an NPZ with those arrays, or a CSV (columns ``item``,
-    ``qdot_1..n``, ``xdot_1..m``, ``J_r_c`` row-major; one row per sample)."""
+    """Read IK data (the reader behind ``pmpjax ik-weights``): the paper's ``.mat`` layout, an NPZ
+    with the arrays below, or a CSV (columns ``item``, ``qdot_1..n``, ``xdot_1..m``, ``J_r_c``
+    row-major; one row per sample).
+
+    **Arguments:**
+
+    - ``path``: the file; its suffix (``.mat``, ``.npz``, ``.csv``) picks the format.
+
+    **Returns:**
+
+    ``{"qdot": (B, K, n) [rad/s], "xdot": (B, K, m), "J": (B, K, m, n), "mask": (B, K) bool,
+    "labels": B item names}`` (a ``.mat`` file's items are participant × condition × target, trials
+    pooled).
+
+    **Raises:**
+
+    ``ValueError`` naming the file (and line and column for CSV) for a missing file, an unknown
+    suffix, missing arrays or columns, or malformed values.
+    """
     path = input_file("path", path)
     suffix = path.suffix.lower()
     if suffix == ".mat":

@@ -581,8 +581,18 @@ def estimate_ik_weights(
     rounding (the sums over samples are reassociated for vectorisation, so their rounding depends
     on the chunk shape).
 
-    **Returns:** :class:`IKWeightsResult`. Not differentiable (clipping, stopping rule); see
+    **Returns:**
+
+    :class:`IKWeightsResult`. Not differentiable (clipping, stopping rule); see
     :func:`estimate_ik_weights_lm` for the gradient-based variant.
+
+    **Raises:**
+
+    ``ValueError``/``TypeError`` naming the argument: inconsistent shapes, a chain that is not redundant
+    (m ≥ n), a non-boolean or misshaped ``mask``, ``gamma`` outside [0, 1],
+    a bad ``w_min``/``w_max``/tolerance, an unknown ``on_invalid``,
+    ``devices`` that are not a list of JAX devices, and (with ``on_invalid="raise"``) items with
+    NaN/inf velocities or rank-deficient Jacobians.
 
     **Compile time:** ≈ 4 s on first use per bucketed batch shape (benchmarks/compile_times.py).
     """
@@ -664,9 +674,29 @@ def _model_residual(w, qdot, xdot, J, gamma, valid):
 
 
 def ik_model_error(w, qdot, xdot, J, gamma=0.0, *, mask=None):
-    """Mean modelling error ``(1/K) Σ_k |e_k|`` (...,) of weights ``w`` (..., n) (Eqs 16–17).
+    """Mean modelling error ``(1/K) Σ_k |e_k|`` of IK weights on data (Eqs 16–17).
 
     Differentiable in ``w`` and the data; invariant to the scale of ``w`` (Eq 4).
+
+    **Arguments:**
+
+    - ``w``: (..., n) positive weights.
+    - ``qdot``: (..., K, n) joint velocities [rad/s].
+    - ``xdot``: (..., K, m) task velocities.
+    - ``J``: (..., K, m, n) Jacobians.
+    - ``gamma``: null-space projection ratio in [0, 1].
+    - ``mask``: optional (..., K) bool valid samples.
+
+    **Returns:**
+
+    (...,) the mean modelling error (units of ``qdot``).
+
+    **Raises:**
+
+    ``ValueError``/``TypeError`` naming the argument: inconsistent shapes, a chain that is not redundant
+    (m ≥ n), a non-boolean or misshaped ``mask``, ``gamma`` outside [0, 1],
+    non-positive ``w`` or ``w`` whose batch axes do not broadcast
+    to the data's.
     """
     qdot, xdot, J, mask = _check_inputs(qdot, xdot, J, mask)
     _check_gamma(gamma, None)
@@ -784,6 +814,23 @@ def estimate_ik_weights_lm(qdot, xdot, J, gamma=0.0, *, mask=None, w_min: float 
     floored at ``w_min``. When ``ẋ = J q̇`` holds exactly, ``e_k = (1 − γ) N q̇_k`` and the
     minimiser does not depend on γ. Each item is fitted independently (``jax.vmap`` of
     ``fitting.least_squares``).
+
+    **Arguments:**
+
+    - ``qdot``, ``xdot``, ``J``, ``gamma``, ``mask``, ``fixed``: as :func:`estimate_ik_weights`.
+    - ``w_min``: the floor of the normalised weights, in (0, 1).
+    - ``max_steps``: Levenberg–Marquardt iterations at most.
+
+    **Returns:**
+
+    :class:`IKWeightsLMResult`.
+
+    **Raises:**
+
+    ``ValueError``/``TypeError`` naming the argument: inconsistent shapes, a chain that is not redundant
+    (m ≥ n), a non-boolean or misshaped ``mask``, ``gamma`` outside [0, 1],
+    a ``w_min`` outside (0, 1), and items with NaN/inf velocities or
+    rank-deficient Jacobians.
 
     **Differentiable** with respect to ``qdot``, ``xdot``, ``J`` and ``gamma`` (``jax.grad``,
     ``jax.jvp``, inside ``jit``/``vmap``): the fitted optimum is differentiated by the implicit

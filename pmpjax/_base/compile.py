@@ -97,7 +97,11 @@ def fast_compile_jit(fun=None, **kwargs):
 
     **Returns:**
 
-    The jitted function (or, without ``fun``, a decorator)."""
+    The jitted function (or, without ``fun``, a decorator).
+
+    **Raises:**
+
+    ``TypeError`` for a non-callable ``fun`` or ``compiler_options`` that are not a dict."""
     if fun is None:
         return functools.partial(fast_compile_jit, **kwargs)
     if not callable(fun):
