@@ -70,6 +70,7 @@ SLOWEST_FIRST = (
     "test_notebook_lambda0_pmp.py", "test_equilibria.py", "test_cli.py", "test_ik_data.py",
     "test_primitives_part.py", "test_models.py", "test_kinematics.py", "test_compilation_cache.py",
     "test_sweep.py", "test_sweep_command.py", "test_notebook_fit_your_own_data.py",
+    "test_docs.py",  # mkdocs build --strict in a subprocess: about 6 s idle
 )
 
 
