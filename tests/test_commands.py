@@ -72,7 +72,7 @@ def test_ik_weights_command_exits_1_when_an_item_did_not_converge(tmp_path, monk
         return types.SimpleNamespace(w=np.ones((2, 3)), converged=np.array([True, False]), error=np.zeros(2),
                                      status=np.array([0, int(pj.Status.MAX_STEPS)]))
 
-    monkeypatch.setattr(fitting._ik.weights, "estimate_ik_weights", fake)
+    monkeypatch.setattr(fitting._ik, "estimate_ik_weights", fake)
     assert cli.main(["ik-weights", example("ik_example.csv"), "--out", str(tmp_path)]) == 1
     assert [r["converged"] for r in read_rows(tmp_path / "ik_weights.csv")] == ["True", "False"]
     assert capsys.readouterr().out.startswith("1 of 2 items converged")
@@ -349,7 +349,7 @@ def unwritable_out(request, tmp_path):
 # Each subcommand, its arguments and the function that does its work (which must not be reached).
 WORK = {
     "fit-donders": (["donders_example.csv"], "fitting._donders", "fit_donders"),
-    "ik-weights": (["ik_example.csv"], "fitting._ik.weights", "estimate_ik_weights"),
+    "ik-weights": (["ik_example.csv"], "fitting._ik", "estimate_ik_weights"),
     "analyze-pointing": (["pointing_example.csv"], "fitting._pointing", "analyze_pointing"),
     "simulate": (["simulate_figure3.toml"], "pmpjax", "simulate"),
     "sweep": (["sweep_figure3.toml"], "fitting._sweep", "sweep"),
