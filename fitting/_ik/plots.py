@@ -42,7 +42,8 @@ def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUG
     groups = groups or [f"task {g + 1}" for g in range(G)]
     panels = panels or [f"{p + 1}" for p in range(P)]
     if ax is None:
-        fig, axes = plt.subplots(P, 1, figsize=(max(6, 1.2 * G), 2.2 * P), sharex=True, squeeze=False)
+        fig, axes = plt.subplots(P, 1, figsize=(max(6.5, 1.2 * G), 2.2 * P + 0.6), sharex=True, squeeze=False,
+                                 layout="constrained")
         axes = axes[:, 0]
     else:
         axes = np.atleast_1d(ax).reshape(-1)
@@ -51,6 +52,7 @@ def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUG
         fig = axes[0].figure
     width = 0.8 / n
     x = np.arange(G)
+    labels = [joints[j] if j < len(joints) else f"joint {j + 1}" for j in range(n)]
     for p in range(P):
         a = axes[p]
         for j in range(n):
@@ -58,13 +60,14 @@ def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUG
             if lo is not None and hi is not None:
                 err = np.stack([np.clip(w[p, :, j] - lo[p, :, j], 0, None),
                                 np.clip(hi[p, :, j] - w[p, :, j], 0, None)])
-            a.bar(x + (j - (n - 1) / 2) * width, w[p, :, j], width, yerr=err, capsize=2,
-                  label=joints[j] if j < len(joints) else f"joint {j + 1}")
+            a.bar(x + (j - (n - 1) / 2) * width, w[p, :, j], width, yerr=err, capsize=2, label=labels[j])
         a.set_ylim(0, 1.1)
         a.set_ylabel(f"{panels[p]}\nweight")
     axes[-1].set_xticks(x, groups)
-    axes[0].legend(ncol=n, fontsize=7, loc="upper right")
+    # Above the top panel, outside every panel (weights reach 1, the top of the axes): in as many
+    # columns as fit the figure's width.
+    ncol = n if sum(len(s) for s in labels) <= 90 else max(1, (n + 1) // 2)
+    axes[0].legend(ncol=ncol, fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.02), frameon=False)
     if title:
-        axes[0].set_title(title)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=10, wrap=True)
     return fig

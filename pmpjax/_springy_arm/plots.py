@@ -102,11 +102,12 @@ def plot_force_field(chain, q_set, K, *, joints=(0, 3), span: float = 0.6, n: in
     x = np.asarray(chain.fk(q))
     F = np.asarray(force_field(chain, q, q_set, K, gravity=gravity))
     x0 = np.asarray(chain.fk(q_set))
-    fig, ax = plt.subplots(figsize=(5, 5))
-    ax.quiver(x[..., 0], x[..., 2], F[..., 0], F[..., 2], angles="xy")
+    fig, ax = plt.subplots(figsize=(5, 5.4), layout="constrained")
+    ax.quiver(x[..., 0], x[..., 2], F[..., 0], F[..., 2], angles="xy", label="hand force")
     ax.plot([x0[0]], [x0[2]], "ro", label="set-point posture")
     ax.set_xlabel("x (forward) [m]")
     ax.set_ylabel("z (up) [m]")
     ax.set_aspect("equal")
-    ax.legend(frameon=False)
+    # Above the axes: the arrows fill the axes, and any place inside would hide some.
+    ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.01), ncol=2, frameon=False)
     return fig
