@@ -3,6 +3,7 @@
 import contextlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -170,6 +171,38 @@ def test_the_progress_display_counts_the_parts_done():
         assert (overall.completed, overall.total) == (2, 3) and "parts done" in overall.description
     finally:
         ui.close()
+
+
+def _shown(ui, task):
+    """The text of a progress row as the display draws it (its text columns)."""
+    from rich.text import Text
+
+    return " ".join(str(r) for c in ui._prog.columns if isinstance(r := c.render(task), Text))
+
+
+def test_a_running_part_shows_its_loops_items_done_of_the_total():
+    """A running part's row has no count ("0/?" for the whole run said nothing); the loops inside
+    it (ctx.progress) show their items done out of the total."""
+    ui = Display(True)
+    try:
+        ui.begin(1)
+        ui.started("fits")
+        row = next(t for t in ui._prog.tasks if "fits" in t.description)
+        assert "running" in _shown(ui, row) and not re.search(r"\d+/(\d+|\?)", _shown(ui, row))
+        assert list(ui.factory(range(5), description="fits: subjects")) == [0, 1, 2, 3, 4]
+        inner = next(t for t in ui._prog.tasks if "subjects" in t.description)
+        assert "fits: subjects 5/5" in _shown(ui, inner)
+    finally:
+        ui.close()
+
+
+def test_log_lines_are_not_wrapped_when_the_output_is_not_a_terminal(capsys):
+    """Written to a file or a pipe (a job's log), a long message stays one line."""
+    ui = Display(False)
+    message = "part: " + " ".join(f"word{k}" for k in range(60))
+    ui.console.print(message)
+    ui.close()
+    assert capsys.readouterr().err.splitlines() == [message]
 
 
 # Parts for the worker-process tests: module-level, so that spawned workers can import them. They
@@ -531,7 +564,7 @@ def test_simulate_command_bad_config_names_file_and_key(tmp_path, capsys, text, 
 
 def test_every_registered_part_carries_its_metadata_and_the_host_names_none():
     """Parts are found by entry point and schedule by their own metadata: every registered part
-    is a Part with positive expected seconds and a ``follows`` naming another registered part;
+    is a Part with positive expected seconds, a human title and a ``follows`` naming another registered part;
     the host modules hold no part's name (adding a part never edits them)."""
     import ast
 
@@ -541,6 +574,8 @@ def test_every_registered_part_carries_its_metadata_and_the_host_names_none():
     assert {"figure3", "figure4", "primitives", "pointing", "reaching", "donders_nio"} <= set(parts)
     for name, part in parts.items():
         assert isinstance(part, Part) and part.seconds > 0 and part.seconds_full > 0 and part.doc, name
+        # a title for the report's section, in words (not the part's identifier)
+        assert len(part.title.split()) >= 3 and "_" not in part.title, name
         assert part.follows is None or (part.follows in parts and part.follows != name), name
     assert [p.order for p in parts.values()] == sorted(p.order for p in parts.values())
     host = Path(cli.__file__).parent

@@ -65,7 +65,7 @@ def test_tables_scroll_inside_their_box(report):
 
 def test_table_numbers_and_status_codes(report):
     html, md = report
-    cells = re.findall(r"<td>([^<]*)</td>", html)
+    cells = re.findall(r"<td(?: class='num')?>([^<]*)</td>", html)
     for shown in ("0.1235", "1235", "123457", "3e-07", "42", "-2", "0.5", "2.25", "SUCCESSFUL", "STALLED", "n/a"):
         assert shown in cells, shown
     assert "0.123456789" not in html and "1234.5678" not in html
@@ -93,3 +93,35 @@ def test_status_of_parts_whose_fits_did_not_all_converge(report):
     assert convergence({"converged": [[True, True], [False, True]]}) == (3, 4)
     assert convergence({"converged": [0.5, 1.0]}) is None and convergence({"converged": 3}) is None
     assert convergence(json.loads(json.dumps({"converged": [True, False]}))) == (1, 2)
+
+
+def test_readable_tables_titles_and_numbers(tmp_path):
+    """Prose columns left-aligned and numbers right-aligned on one line; NaN shown as "—"; a unit
+    suffix shown as the unit in brackets; the part's human title as its section title (its name
+    in small print); long tables folded; numbers in captions not broken across lines."""
+    rows = [["subject", "note", "tau0_s", "p", "A_net [1]"]]
+    rows += [[f"S{k:02d}", "a long sentence of prose in a table cell", 0.1 + k, "nan", 1e-5] for k in range(20)]
+    with (tmp_path / "long.csv").open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    results = {"_meta": {}, "ik_hugmp": {
+        "status": "ok", "seconds": 1.0, "doc": "Weights.", "title": "IK weights of the HuG-MP recordings",
+        "artefacts": [{"kind": "table", "path": "long.csv", "caption": "Hotelling T² = 225.3, p = 3.1e-05."}]}}
+    write_report(tmp_path, results)
+    html = (tmp_path / "report.html").read_text()
+    md = (tmp_path / "report.md").read_text()
+    assert "text-align:left" in html and ".num{text-align:right;white-space:nowrap}" in html
+    assert "<th class='num'>tau0 [s]</th>" in html and "<th>note</th>" in html and "A_net [1]" in html
+    assert "<td>a long sentence of prose in a table cell</td>" in html and "<td class='num'>0.1</td>" in html
+    assert html.count("<td class='num'>—</td>") == 20 and ">nan<" not in html and "| — |" in md
+    assert "<span class='nw'>p = 3.1e-05</span>" in html and ".nw{white-space:nowrap}" in html
+    assert re.search(r"<h2 id='ik_hugmp'>IK weights of the HuG-MP recordings <small>\(part <code>ik_hugmp</code>"
+                     r"\)</small></h2>", html)
+    assert "## IK weights of the HuG-MP recordings (`ik_hugmp`)" in md
+    assert "<a href='#ik_hugmp'>IK weights of the HuG-MP recordings</a>" in html
+    assert "<details><summary>20 rows (click to show)</summary>" in html
+    short = {"_meta": {}, "p": {"status": "ok", "doc": "", "artefacts": [
+        {"kind": "table", "path": "short.csv", "caption": "Few rows."}]}}
+    (tmp_path / "short.csv").write_text("a,b\n1,2\n")
+    write_report(tmp_path, short)
+    html = (tmp_path / "report.html").read_text()
+    assert "<details>" not in html and "<h2 id='p'>p</h2>" in html

@@ -124,8 +124,9 @@ def _sweeps_in(ctx, store: Path) -> dict:
     a_net = cmap.outputs["A_net"].reshape(len(anisotropy), len(rest_ps), 8)
     fig = plot_curvature_map(anisotropy, rest_ps, a_net)
     ctx.figure(fig, "curvature_map.png",
-               "Curvature map: A_net of the outbound λ0-PMP movement to each target over stiffness anisotropy "
-               "KJ[FE]/KJ[RUD] × rest pronation-supination.",
+               "Curvature map: A_net of the outbound λ0-PMP movement to each target over the stiffness ratio "
+               "K_RUD / K_FE (radial–ulnar deviation over flexion–extension; Figure 3's KJ has 4/3) × the rest "
+               "posture's pronation–supination angle.",
                "Tommasino & Campolo (2017) Figure 3A: anisotropic stiffness curves the diagonal paths.")
 
     names, KJ, q_rest = pj.paper_subjects()
@@ -485,11 +486,19 @@ def _movements(ctx) -> dict:
     }
 
 
-pointing = Part(_pointing, seconds=29, seconds_full=36, order=20)
-donders_nio = Part(_donders_nio, seconds=2, seconds_full=2, follows="pointing", order=10)  # (pointing's NIO shapes)
-ik_figures = Part(_ik_figures, seconds=7, seconds_full=8, order=30)
-ik_synthetic = Part(_ik_synthetic, seconds=6, seconds_full=8, order=40)
-ik_hugmp = Part(_ik_hugmp, seconds=7, seconds_full=62, order=50)
-reaching = Part(_reaching, seconds=45, seconds_full=106, order=60)
-sweeps = Part(_sweeps, seconds=12, seconds_full=26, order=70)
-movements = Part(_movements, seconds=60, seconds_full=110, order=65)
+pointing = Part(_pointing, seconds=29, seconds_full=36, order=20,
+                title="A pointing experiment analysed as in the paper (Figures 5–8)")
+donders_nio = Part(_donders_nio, seconds=2, seconds_full=2, follows="pointing", order=10,
+                   title="Wrist stiffness and rest posture from Donders surfaces (NIO fit)")  # (pointing's NIO shapes)
+ik_figures = Part(_ik_figures, seconds=7, seconds_full=8, order=30,
+                  title="IK weights on the paper's examples (Khoramshahi et al. Figures 1–3)")
+ik_synthetic = Part(_ik_synthetic, seconds=6, seconds_full=8, order=40,
+                    title="IK weights in two conditions, with Hotelling's T² (Experiment 1)")
+ik_hugmp = Part(_ik_hugmp, seconds=7, seconds_full=62, order=50,
+                title="IK weights of the HuG-MP recordings")
+reaching = Part(_reaching, seconds=45, seconds_full=106, order=60,
+                title="HuG-MP reaching: the fitted λ0-PMP on held-out movements")
+sweeps = Part(_sweeps, seconds=12, seconds_full=26, order=70,
+              title="Sweeps: a curvature map and the Donders fit's power")
+movements = Part(_movements, seconds=60, seconds_full=110, order=65,
+                 title="Your own arm: movements fitted through continuous recordings")

@@ -6,6 +6,21 @@ from __future__ import annotations
 import contextlib
 
 
+def _DoneOfTotal():  # noqa: N802 - a rich column, built when rich is imported
+    """Rich's "done/total" column that shows nothing for a task without a total (a running part
+    whose own loops show their counts), instead of "0/?"."""
+    from rich.progress import ProgressColumn
+    from rich.text import Text
+
+    class DoneOfTotal(ProgressColumn):
+        def render(self, task):
+            if task.total is None:
+                return Text("")
+            return Text(f"{int(task.completed)}/{int(task.total)}", style="progress.download")
+
+    return DoneOfTotal()
+
+
 class Display:
     """The parent's display: a rich console, one line per running part with its elapsed time, the
     parts done out of those to run, a line per finished part with its status, and the progress
@@ -15,9 +30,11 @@ class Display:
         import threading
 
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+        from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         self.console = Console(stderr=True)
+        if not self.console.is_terminal:  # (a log file or a pipe: one line per message, however long)
+            self.console.soft_wrap = True
         self.enabled = enabled
         self._lock = threading.RLock()  # (the pump thread and the main thread both change the tasks)
         self._tasks: dict[str, object] = {}
@@ -26,7 +43,7 @@ class Display:
         self._n_parts, self._n_done, self._overall = 0, 0, None
         if enabled:
             self._prog = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(),
-                                  MofNCompleteColumn(), TimeElapsedColumn(), console=self.console, transient=True)
+                                  _DoneOfTotal(), TimeElapsedColumn(), console=self.console, transient=True)
             self._prog.start()
 
     def begin(self, n_parts: int) -> None:

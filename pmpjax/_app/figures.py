@@ -56,5 +56,7 @@ def _figure4(ctx: PartContext) -> dict:
             "velocity_jump_max": float(np.abs(np.diff(v[:, 0])).max())}
 
 
-figure3 = Part(_figure3, seconds=2, seconds_full=2, order=0)
-figure4 = Part(_figure4, seconds=1, seconds_full=1, order=80)
+figure3 = Part(_figure3, seconds=2, seconds_full=2, order=0,
+               title="λ0-PMP center-out movements (Tommasino & Campolo Figure 3)")
+figure4 = Part(_figure4, seconds=1, seconds_full=1, order=80,
+               title="Summed minimum-jerk set-point moves (Williamson Figure 4)")

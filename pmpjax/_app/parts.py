@@ -27,13 +27,14 @@ class Part:
     on two workers (the order in which workers take parts, longest first, before ``results.json``
     has measured times); ``follows``: a part whose compilations this one reuses (with both to run,
     it waits for that part and runs on the same worker); ``order``: its place in ``results.json``
-    and the report."""
+    and the report; ``title``: its section title in the report (else its name)."""
 
     fn: Callable[[PartContext], dict]
     seconds: float = 10.0
     seconds_full: float = 10.0
     follows: str | None = None
     order: int = 1000
+    title: str = ""
 
     def __call__(self, ctx: PartContext) -> dict:
         return self.fn(ctx)
@@ -156,6 +157,8 @@ def run_part(name: str, part, ctx: PartContext) -> dict:
     try:
         part = as_part(part)
         doc = part.doc
+        if part.title:
+            entry["title"] = part.title
         res = part(ctx)
         entry["status"] = "ok"
         if (c := convergence(res)) is not None:

@@ -211,4 +211,5 @@ def _primitives(ctx) -> dict:
     }
 
 
-primitives = Part(_primitives, seconds=6, seconds_full=6, order=90)
+primitives = Part(_primitives, seconds=6, seconds_full=6, order=90,
+                  title="Postural primitives: blends, force fields and reflexes (Williamson 1996)")

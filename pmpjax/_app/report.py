@@ -25,6 +25,16 @@ MAX_OTHER_FILES = 300
 _MARKUP = re.compile(r"``(.+?)``|`([^`\n]+)`|\*\*(.+?)\*\*")
 _INT = re.compile(r"[+-]?\d+")
 _FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+#: A number in prose after a comparison ("p = 3.1e-05", "< 0.001"), or with an exponent: kept on one line.
+_PROSE_NUMBER = re.compile(r"(?:\b[pF]\s?(?:=|&lt;|&gt;|≤|≥)\s?|(?:&lt;|&gt;|≤|≥|≈)\s?)"
+                           r"[-+−]?\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?|[-+−]?\d+(?:\.\d+)?[eE][-+−]?\d+")
+#: Unit suffixes of column names shown as units in brackets ("tau0_s" as "tau0 [s]").
+_UNIT_SUFFIXES = {"_m_per_s": "m/s", "_rad_s": "rad/s", "_deg": "deg", "_rad": "rad", "_ms": "ms", "_s": "s",
+                  "_Nm": "Nm", "_m": "m", "_N": "N"}
+#: Tables longer than this are folded (a summary line opens them).
+FOLD_ROWS = 12
+#: Shown for a number that is not one (NaN: no data, no test).
+MISSING = "—"
 
 
 def convergence(results) -> tuple[int, int] | None:
@@ -62,9 +72,15 @@ def _inline(text: str) -> str:
     out, pos = [], 0
     for m in _MARKUP.finditer(text):
         tag = "b" if m[3] else "code"
-        out += [html.escape(text[pos:m.start()]), f"<{tag}>{html.escape(m[1] or m[2] or m[3])}</{tag}>"]
+        out += [_nowrap_numbers(html.escape(text[pos:m.start()])),
+                f"<{tag}>{html.escape(m[1] or m[2] or m[3])}</{tag}>"]
         pos = m.end()
-    return "".join(out) + html.escape(text[pos:])
+    return "".join(out) + _nowrap_numbers(html.escape(text[pos:]))
+
+
+def _nowrap_numbers(escaped: str) -> str:
+    """HTML-escaped prose with each number (and the comparison before it) on one line."""
+    return _PROSE_NUMBER.sub(lambda m: f"<span class='nw'>{m[0]}</span>", escaped)
 
 
 def _paper(text: str) -> str:
@@ -72,8 +88,25 @@ def _paper(text: str) -> str:
     return text if re.search(r"\bpapers?\b", text, re.IGNORECASE) else f"Paper: {text}"
 
 
+def header(column: str) -> str:
+    """A CSV column name as shown: a unit suffix in brackets (``tau0_s`` as ``tau0 [s]``)."""
+    if "[" not in column:
+        for suffix, unit in _UNIT_SUFFIXES.items():
+            if column.endswith(suffix) and len(column) > len(suffix):
+                return f"{column[:-len(suffix)]} [{unit}]"
+    return column
+
+
+def is_number(shown: str) -> bool:
+    """A shown cell that is a number (right-aligned, never wrapped) or the mark of a missing one."""
+    return shown == MISSING or bool(_FLOAT.fullmatch(shown)) or shown.lower() in ("inf", "-inf", "+inf")
+
+
 def _cell(value: str, column: str) -> str:
-    """A CSV cell as shown: status codes by name, numbers to about four significant digits."""
+    """A CSV cell as shown: status codes by name, numbers to about four significant digits, NaN
+    as "—"."""
+    if value.strip().lower() in ("nan", "+nan", "-nan"):
+        return MISSING
     if column.strip().lower() == "status" and _INT.fullmatch(value):
         from .._base.status import Status
 
@@ -85,6 +118,21 @@ def _cell(value: str, column: str) -> str:
         return value
     x = float(value)
     return f"{x:.0f}" if 1e4 <= abs(x) < 1e15 else f"{x:.4g}"
+
+
+def _numeric_column(rows, i: int) -> bool:
+    """Every shown cell of column ``i`` a number (or missing)."""
+    cells = [r[i] for r in rows if i < len(r) and r[i] != ""]
+    return bool(cells) and all(is_number(c) for c in cells)
+
+
+def _num(numeric: bool) -> str:
+    return " class='num'" if numeric else ""
+
+
+def section_title(name: str, entry: dict) -> str:
+    """A part's section title: its ``title`` (a human one), else its name."""
+    return entry.get("title") or name
 
 
 def _href(path: str) -> str:
@@ -131,16 +179,20 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
     for name, entry in _parts(results):
         label, cls = part_status(entry)
         doc = " ".join(entry.get("doc", "").split())  # one table row, however the docstring wraps
-        md.append(f"| [{name}](#{name}) | {label} | {entry.get('seconds', '')} | {doc} |")
+        title = section_title(name, entry)
+        md.append(f"| [{title}](#{name}) | {label} | {entry.get('seconds', '')} | {doc} |")
         rows_html.append(
-            f"<tr><td><a href='#{name}'>{name}</a></td><td class='{cls}'>{html.escape(label)}</td>"
-            f"<td>{entry.get('seconds', '')}</td><td>{_inline(doc)}</td></tr>"
+            f"<tr><td><a href='#{name}'>{html.escape(title)}</a></td><td class='{cls}'>{html.escape(label)}</td>"
+            f"<td class='num'>{entry.get('seconds', '')}</td><td>{_inline(doc)}</td></tr>"
         )
-    body.append("<div class='scroll'><table><tr><th>part</th><th>status</th><th>wall time [s]</th>"
+    body.append("<div class='scroll'><table><tr><th>part</th><th>status</th><th class='num'>wall time [s]</th>"
                 "<th>what it is</th></tr>" + "".join(rows_html) + "</table></div>")
     for name, entry in _parts(results):
-        md += ["", f"## {name}", "", entry.get("doc", "")]
-        body.append(f"<h2 id='{name}'>{html.escape(name)}</h2><p>{_inline(entry.get('doc', ''))}</p>")
+        title = section_title(name, entry)
+        md += ["", f"## {title}" + (f" (`{name}`)" if title != name else ""), "", entry.get("doc", "")]
+        body.append(f"<h2 id='{name}'>{html.escape(title)}"
+                    + (f" <small>(part <code>{html.escape(name)}</code>)</small>" if title != name else "")
+                    + f"</h2><p>{_inline(entry.get('doc', ''))}</p>")
         label, cls = part_status(entry)
         if cls == "partial":
             md += ["", f"**Status: {label}** (the fits' status in results.json)"]
@@ -169,15 +221,23 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
                 table = ""
                 if path.exists():
                     head, rows, more = _read_csv(path)
-                    md += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+                    head = [header(h) for h in head]
+                    md += ["| " + " | ".join(head) + " |",
+                           "|" + "".join("---:|" if _numeric_column(rows, i) else "---|" for i in range(len(head)))]
                     md += ["| " + " | ".join(r) + " |" for r in rows]
                     if more:
                         md.append(f"| … {more} more rows in {a['path']} |")
-                    table = ("<div class='scroll'><table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head)
-                             + "</tr>" + "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                    num = [_numeric_column(rows, i) for i in range(len(head))]
+                    table = ("<div class='scroll'><table><tr>"
+                             + "".join(f"<th{_num(num[i])}>{html.escape(h)}</th>" for i, h in enumerate(head))
+                             + "</tr>" + "".join("<tr>" + "".join(f"<td{_num(is_number(c))}>{html.escape(c)}</td>"
+                                                                  for c in r) + "</tr>"
                                                  for r in rows) + "</table></div>")
                     if more:
                         table += f"<p>… {more} more rows in {_link(a['path'])}</p>"
+                    if len(rows) > FOLD_ROWS:
+                        table = (f"<details><summary>{len(rows) + more} rows (click to show)</summary>{table}"
+                                 "</details>")
                 body.append(f"<div class='table'>{cap}{table}</div>")
     others = _other_files(out, linked)
     if others:
@@ -203,7 +263,8 @@ def write_report(out: Path, results: dict) -> tuple[Path, Path]:
         "<!doctype html><html><head><meta charset='utf-8'><title>" + html.escape(TITLE) + "</title><style>"
         "body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.45}"
         "img{max-width:100%;border:1px solid #ddd}table{border-collapse:collapse;margin:.5em 0;font-size:.9em}"
-        "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}th{background:#f3f3f3}"
+        "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left;vertical-align:top}th{background:#f3f3f3}"
+        ".num{text-align:right;white-space:nowrap}.nw{white-space:nowrap}summary{cursor:pointer;color:#333}"
         ".scroll{overflow-x:auto;max-width:100%}code{background:#f3f3f3;padding:0 .2em;border-radius:3px}"
         ".ok{color:#060}.partial{color:#b36b00}.failed{color:#b00}em{color:#555}figure{margin:1.5em 0}"
         "</style></head><body>" + "\n".join(body) + "</body></html>\n"
