@@ -50,7 +50,9 @@ from ._base.validate import as_array as as_array
 from ._base.validate import check_finite_masked as check_finite_masked
 from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int
+from ._base.validate import check_joint_angles as check_joint_angles
 from ._base.validate import check_prng_key as check_prng_key
+from ._base.validate import check_seconds as check_seconds
 from ._base.validate import check_spd as check_spd
 from ._base.validate import csv_floats as csv_floats
 from ._base.validate import input_file as input_file

@@ -25,7 +25,10 @@ Sweepable parameters: ``model.tau0`` [s] (``W = τ0 KJ``, Eq 7), ``model.KJ[i,j]
 Metrics, one value per target: ``A_net``, ``A_sum`` (curvature areas between the path and the
 line from its start to the target, normalised by ``sweep.area_scale``², default π/12),
 ``final_error`` [task units] (distance from the target at the end), ``peak_speed`` [task
-units/s]. Each movement is saved at every RK4 step (``simulation.save_every`` is not used).
+units/s]. Each movement is saved at every RK4 step (``simulation.save_every`` is not used). A
+row whose hand ends short of a target (farther than ``simulation.reach_tol``, default 0.1, times
+its start distance) has status NOT_REACHED. Swept time constants are checked like the file's:
+above 10 s refused as milliseconds, above 2 s a warning.
 
 Writes ``sweep.csv`` (one row per parameter set: parameters, ``<metric>_<target>``, status,
 reason), ``sweep.json`` (the same arrays and a summary) and, for a 1-D or 2-D grid without
@@ -41,12 +44,13 @@ import csv
 import itertools
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from pmpjax._app import ConfigError, build_simulation, example_help, plain, plural, read_config
-from pmpjax.internal import check_rk4_stability, output_dir, write_json
+from pmpjax.internal import check_rk4_stability, check_seconds, output_dir, write_json
 
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
@@ -226,6 +230,12 @@ def build_sweep(path):
         if name in parsed and np.any(np.asarray(v) <= 0):
             row = int(np.argmax(np.asarray(v) <= 0))
             raise ConfigError(f"{path}: {name} must be positive; row {row} of the sweep has {float(v[row])}")
+        if name in parsed and name != "planner.k":  # seconds: milliseconds refused, implausible values warned
+            row = int(np.argmax(np.asarray(v)))
+            try:
+                check_seconds(f"{name} (row {row} of the sweep)", float(v[row]))
+            except ValueError as e:
+                raise ConfigError(f"{path}: {e}") from None
     if any(p[0] == "model.KJ" for p in parsed.values()):
         lam = np.linalg.eigvalsh(KJ)[:, 0]
         if np.any(lam <= 0):
@@ -234,7 +244,7 @@ def build_sweep(path):
             raise ConfigError(f"{path}: model.KJ is not positive definite in row {row} of the sweep "
                               f"({', '.join(f'{nm} = {params[nm][row]:g}' for nm in names)})")
 
-    dur, dt = opt["duration"], opt["dt"]
+    dur, dt, reach_tol = opt["duration"], opt["dt"], opt["reach_tol"]
     tg = jnp.asarray(targets)
     T = len(targets)
 
@@ -260,7 +270,12 @@ def build_sweep(path):
 
     # simulate's RK4 step check on every row at once (it is skipped inside the traced kernel).
     N = len(next(iter(params.values())))
-    mdl_all, pl_all = make(KJ, q_rest, t0, k, tau)
+    try:
+        with warnings.catch_warnings():  # (the units of swept time constants are warned about above)
+            warnings.filterwarnings("ignore", r"`(tau|tau0)` = ")
+            mdl_all, pl_all = make(KJ, q_rest, t0, k, tau)
+    except ValueError as e:
+        raise ConfigError(f"{path}: in some row of the sweep, {e}") from None
     try:
         check_rk4_stability(mdl_all, pl_all, q0s, (N,), dur / max(1, math.ceil(dur / dt - 1e-9)))
     except ValueError as e:
@@ -270,7 +285,7 @@ def build_sweep(path):
         row_base = {**base, **{key: jnp.asarray(base[key]) for key in ("KJ", "q_rest", "q0")}}
         KJ, q_rest, q0, tau0, k, tau = _row_values(row_base, parsed, p, jnp)
         mdl, pl = make(KJ, q_rest, tau0, k, tau)
-        tr = pj.simulate(mdl, pl, jnp.broadcast_to(q0, (T, n)), tg, duration=dur, dt=dt)
+        tr = pj.simulate(mdl, pl, jnp.broadcast_to(q0, (T, n)), tg, duration=dur, dt=dt, reach_tol=reach_tol)
         res = {}
         if "A_net" in metrics or "A_sum" in metrics:
             a_sum, a_net = pj.curvature_measures(tr.x, tr.x[:, 0], tg, scale=scale)

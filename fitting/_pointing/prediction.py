@@ -24,6 +24,7 @@ from pmpjax import (
 )
 from pmpjax.internal import (
     as_array,
+    check_seconds,
     check_spd,
     model_grid,
     normalised_movements,
@@ -67,6 +68,7 @@ def _time_constant(name, v, T):
         raise ValueError(f"`{name}` must be a scalar, (S,) or (S, L) = {T.shape} [s], got shape {np.shape(v)}") from e
     if np.any(a <= 0):
         raise ValueError(f"`{name}` must be positive [s], got {a.min()}")
+    check_seconds(name, a)
     return a
 
 

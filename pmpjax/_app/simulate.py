@@ -26,7 +26,8 @@ def run_simulation_config(path, out) -> dict:
     out = output_dir("--out", out)
     try:
         traj = pj.simulate(model, planner, np.broadcast_to(q0, (len(targets), q0.shape[0])), targets,
-                           duration=opt["duration"], dt=opt["dt"], saveat=pj.SaveAt(every=opt["every"]))
+                           duration=opt["duration"], dt=opt["dt"], saveat=pj.SaveAt(every=opt["every"]),
+                           reach_tol=opt["reach_tol"])
     except ValueError as e:
         raise ConfigError(f"{path}: {e}") from None
     t, q, x = (np.asarray(a) for a in (traj.t, traj.q, traj.x))

@@ -25,6 +25,7 @@ class Status(enum.IntEnum):
     TOO_FEW_DATA = 7
     NOT_MINIMUM = 8
     INACCURATE = 9
+    NOT_REACHED = 10
 
     @property
     def message(self) -> str:
@@ -43,6 +44,8 @@ _MESSAGES = {
     Status.NOT_MINIMUM: "a stationary point that is not a strict local minimum (a saddle or maximum)",
     Status.INACCURATE: ("the estimated integration error exceeds the tolerance (atol + rtol·max|q|): use a "
                         "smaller `dt`, solver='rodas4' or adaptive steps (dt=None)"),
+    Status.NOT_REACHED: ("did not reach the target within the duration: the hand ended farther from it than "
+                         "the reach tolerance (a longer duration, or time constants in seconds, not milliseconds?)"),
 }
 
 

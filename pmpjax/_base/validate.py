@@ -233,3 +233,83 @@ def output_dir(name: str, path) -> Path:
     os.close(fd)
     os.unlink(probe)
     return path
+
+
+# --- units and ranges of times and joint angles -----------------------------------------------
+
+#: Time constants (τ, τ0) [s] above which a value is refused: no human arm or wrist movement has a
+#: time constant of 10 s (the paper's are 0.06–0.12 s for 0.3–0.6 s movements), so such a value is
+#: almost surely milliseconds (``tau=80`` for 80 ms).
+MAX_TIME_CONSTANT = 10.0
+#: Time constants [s] above which a value runs with a warning: a reach of a few seconds at most
+#: has time constants well under a second.
+PLAUSIBLE_TIME_CONSTANT = 2.0
+#: Movement durations [s] above which a value is refused (one movement of a minute; ``duration=400``
+#: is 400 ms typed as seconds).
+MAX_DURATION = 60.0
+#: Movement durations [s] above which a value runs with a warning (human reaches last 0.2–3 s).
+PLAUSIBLE_DURATION = 10.0
+#: Joint angles [rad] beyond a full turn are refused on every chain: degrees typed as radians.
+MAX_JOINT_ANGLE = 2 * np.pi
+
+
+def _largest(a: np.ndarray) -> tuple[float, str]:
+    """The largest ``|a|`` and where it is (``" (item i, j)"`` for arrays of more than one value)."""
+    flat = np.abs(a).reshape(-1)
+    i = int(np.argmax(flat))
+    where = "" if a.size == 1 else f" (index {', '.join(map(str, np.unravel_index(i, a.shape)))})"
+    return float(a.reshape(-1)[i]), where
+
+
+def check_seconds(name: str, v: Any, *, kind: str = "time constant") -> None:
+    """Refuse (``ValueError``) or warn about a time [s] that no human arm or wrist movement has.
+
+    ``kind`` "time constant" (τ, τ0): refused above :data:`MAX_TIME_CONSTANT` (10 s), a warning
+    above :data:`PLAUSIBLE_TIME_CONSTANT` (2 s); "duration" (of one movement): refused above
+    :data:`MAX_DURATION` (60 s), a warning above :data:`PLAUSIBLE_DURATION` (10 s). The message
+    names ``name``, the value and the unit it probably is in. Only concrete values are checked
+    (inside a caller's ``jit`` nothing is raised)."""
+    if v is None or not is_concrete(v):
+        return
+    a = np.asarray(v, dtype=float)
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        return
+    hi, warn = (MAX_DURATION, PLAUSIBLE_DURATION) if kind == "duration" else (MAX_TIME_CONSTANT,
+                                                                              PLAUSIBLE_TIME_CONSTANT)
+    top, where = _largest(a)
+    if abs(top) > hi:
+        raise ValueError(f"`{name}` = {top:g}{where} s: a human arm or wrist movement's {kind} is under "
+                         f"{hi:g} s; milliseconds? {top:g} ms is {top / 1000:g} s")
+    if abs(top) > warn:
+        import warnings
+
+        warnings.warn(f"`{name}` = {top:g}{where} s is longer than any human reach's {kind} (under {warn:g} s); "
+                      f"milliseconds? {top:g} ms is {top / 1000:g} s", UserWarning, stacklevel=3)
+
+
+def check_joint_angles(name: str, q: Any, chain=None) -> None:
+    """Refuse (``ValueError``) or warn about joint angles [rad] that look like degrees.
+
+    An angle beyond ``chain.angle_error`` [rad] is refused (default :data:`MAX_JOINT_ANGLE`, a
+    full turn, on every chain; the wrist's π: no wrist joint turns 180° from neutral), and one
+    beyond ``chain.angle_limit`` [rad] runs with a warning (a chain with a human range: the wrist's
+    π/2, the shoulder–elbow arm's π). The message names ``name``, the value and its size in
+    degrees. Only concrete values are checked (inside a caller's ``jit`` nothing is raised)."""
+    if q is None or not is_concrete(q):
+        return
+    a = np.asarray(q, dtype=float)
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        return
+    top, where = _largest(a)
+    limit = getattr(chain, "angle_limit", None)
+    refuse = getattr(chain, "angle_error", None) or MAX_JOINT_ANGLE
+    what = f"{type(chain).__name__} joint" if chain is not None else "joint"
+    if abs(top) > refuse:
+        raise ValueError(f"`{name}` = {top:g}{where} rad ({np.rad2deg(top):.0f}°) is beyond any {what}'s range "
+                         f"(±{refuse:.3g} rad); degrees? {top:g}° is {np.deg2rad(top):.4g} rad (np.deg2rad)")
+    if limit is not None and abs(top) > limit:
+        import warnings
+
+        warnings.warn(f"`{name}` = {top:g}{where} rad ({np.rad2deg(top):.0f}°) is beyond the human range of a "
+                      f"{what} (±{np.rad2deg(limit):.0f}°); degrees? {top:g}° is {np.deg2rad(top):.4g} rad",
+                      UserWarning, stacklevel=3)

@@ -21,7 +21,7 @@ from .._base.linalg import det_lists, elements, from_soa, to_soa
 from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
 from .._base.rotations import rotation_matrix
 from .._base.trig import sincos
-from .._base.validate import as_array, check_positive, is_concrete, to_jax
+from .._base.validate import MAX_JOINT_ANGLE, as_array, check_joint_angles, check_positive, is_concrete, to_jax
 
 
 class Chain:
@@ -47,10 +47,22 @@ class Chain:
     loop; ``Wrist``, ``PlanarArm`` and ``ShoulderElbowArm`` do. Without it the base class builds that kernel
     from ``fk`` (and ``jacobian``) by ``jax.vmap``, as :class:`FunctionChain` does for a plain
     function.
+
+    **Joint-angle ranges.** ``angle_error`` [rad] (class attribute, default ``2π``): ``simulate``'s
+    ``q0`` and the models' ``q_rest`` beyond it are refused as degrees typed as radians;
+    ``angle_limit`` [rad] (default None): beyond it they run with a warning (a chain with a human
+    range sets it).
     """
 
     n: int
     m: int
+    angle_error = MAX_JOINT_ANGLE
+    angle_limit = None
+
+    def check_angles(self, name: str, q) -> None:
+        """Refuse joint angles ``q`` (..., n) [rad] beyond ``angle_error`` and warn beyond
+        ``angle_limit`` (degrees typed as radians, most likely); the message names ``name``."""
+        check_joint_angles(name, q, self)
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -168,7 +180,14 @@ class Wrist(Chain):
     The Jacobian is analytic. It loses rank where the pointing axis ``R e_x`` lies in the screen
     plane (``|x| = d``), which includes gimbal lock at ``q_FE = ±π/2``; ``reachable`` accepts
     ``|x| ≤ d·sin(max_angle)`` (default 80°) to stay clear of that rim.
+
+    Joint angles beyond ±π (180°: no wrist joint turns that far from neutral) are refused as
+    degrees typed as radians, and beyond ±π/2 (90°, the end of the human range of pronation)
+    they run with a warning (``angle_error``, ``angle_limit``).
     """
+
+    angle_error = float(np.pi)
+    angle_limit = float(np.pi / 2)
 
     d: jax.Array = 1.0  # array leaf [m] (differentiable, vmappable)
     max_angle: float = static_field(default=float(np.deg2rad(80.0)))

@@ -39,8 +39,12 @@ class ShoulderElbowArm(Chain):
     ``L1`` upper-arm and ``L2`` forearm-to-hand lengths [m] are array leaves (differentiable,
     vmappable). Analytic Jacobian: column i is ``a_i × (p − o_i)`` with the joint axes
     ``a1 = x̂``, ``a2 = Rx ŷ``, ``a3 = −Rx Ry ẑ``, ``a4 = −Rx Ry Rz ŷ`` and ``o_4`` the elbow.
-    The Jacobian loses rank with the elbow straight (q4 = 0).
+    The Jacobian loses rank with the elbow straight (q4 = 0). Joint angles beyond ±π (180°, past
+    the human range of every joint of the arm) run with a warning, beyond ±2π they are refused
+    (``angle_limit``, ``angle_error``: degrees typed as radians).
     """
+
+    angle_limit = float(np.pi)
 
     #: Plot labels of q1..q4 with the sign of each movement (class attribute, not a field).
     joint_names = ("q1 shoulder abd.(−)/add.(+)", "q2 shoulder flex.(−)/ext.(+)",

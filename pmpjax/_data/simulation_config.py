@@ -24,18 +24,25 @@ Example (TOML; the same keys in JSON)::
     duration = 0.4          # [s]
     dt = 0.001              # [s]
     save_every = 10         # RK4 steps between saved samples
+    reach_tol = 0.1         # a movement ending farther from its target than 0.1 × its start
+                            # distance did not reach it (status NOT_REACHED)
 
-Errors name the file and the key (and line and column for syntax errors).
+Errors name the file and the key (and line and column for syntax errors). Times are in seconds and
+angles in radians unless the key ends in ``_deg``: a time constant (``model.tau0``,
+``planner.tau``) above 10 s or a duration above 60 s is refused as milliseconds, one above 2 s or
+10 s runs with a warning; a joint angle beyond the chain's range (the wrist: ±180°, any chain: a
+full turn) is refused as degrees (use ``q0_deg``, ``q_rest_deg``).
 """
 
 from __future__ import annotations
 
 import json
 import tomllib
+import warnings
 
 import numpy as np
 
-from .._base.validate import check_spd, input_file, read_text_file
+from .._base.validate import check_seconds, check_spd, input_file, read_text_file
 from .._chains.kinematics import PlanarArm, Wrist
 from .._pmp.models import PMP1, PMP2, Lambda0PMP, damping_from_stiffness
 from .._pmp.planners import ArimotoPlanner, ConstantPlanner, MinimumJerkPlanner
@@ -71,6 +78,14 @@ def _get(cfg, path, section, key, default=...):
     return sec[key]
 
 
+def _checked(path, check, *args, **kwargs):
+    """``check(*args, **kwargs)`` with a ``ValueError`` as a ``ConfigError`` naming the file."""
+    try:
+        check(*args, **kwargs)
+    except ValueError as e:
+        raise ConfigError(f"{path}: {e}") from None
+
+
 def _array(path, name, value, shape=None):
     try:
         a = np.asarray(value, dtype=float)
@@ -87,12 +102,17 @@ def _array(path, name, value, shape=None):
     return a
 
 
+#: Default ``simulation.reach_tol``: a movement that ends farther from its target than this share of
+#: its start distance did not reach it (``pmpjax.simulate``'s ``reach_tol``; status NOT_REACHED).
+REACH_TOL = 0.1
+
+
 #: The keys each table of a simulation configuration may hold (``[sweep]`` is the sweep command's).
 KNOWN_KEYS = {
     "chain": {"type", "d", "lengths"},
     "model": {"type", "KJ", "KJ_diag", "q_rest", "q_rest_deg", "W", "tau0"},
     "planner": {"type", "k", "tau", "duration"},
-    "simulation": {"duration", "dt", "q0", "q0_deg", "targets", "save_every"},
+    "simulation": {"duration", "dt", "q0", "q0_deg", "targets", "save_every", "reach_tol"},
 }
 
 
@@ -119,7 +139,7 @@ def check_keys(cfg: dict, path, extra_tables=()) -> None:
 
 def read_simulation_config(path):
     """``(model, planner, q0, targets, options)`` of a simulation file (TOML or JSON, the format of
-    ``pmpjax simulate``; ``options``: ``duration``, ``dt``, ``every``, ``names``). Raises
+    ``pmpjax simulate``; ``options``: ``duration``, ``dt``, ``every``, ``names``, ``reach_tol``). Raises
     ``ValueError`` naming the file and the key (unknown keys too)."""
     return build_simulation(read_config(path), path)
 
@@ -149,12 +169,21 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
         q_rest = np.deg2rad(_array(path, "model.q_rest_deg", cfg["model"]["q_rest_deg"], (n,)))
     else:
         q_rest = _array(path, "model.q_rest", _get(cfg, path, "model", "q_rest", np.zeros(n)), (n,))
+        _checked(path, chain.check_angles, "model.q_rest", q_rest)
     if "W" in cfg.get("model", {}):
         W = _array(path, "model.W", cfg["model"]["W"], (n, n))
         tau0 = None
     else:
         tau0 = float(_get(cfg, path, "model", "tau0", 0.08))
+        _checked(path, check_seconds, "model.tau0", tau0)
         W = None
+    with warnings.catch_warnings():  # the API's own unit warnings: given by the file's key names instead
+        warnings.filterwarnings("ignore", r"`(tau|tau0|duration|q_rest|q0)` = ")
+        return _build(cfg, path, chain, mtype, KJ, q_rest, W, tau0)
+
+
+def _build(cfg, path, chain, mtype, KJ, q_rest, W, tau0):
+    n = chain.n
     try:
         if mtype != "pmp1":
             check_spd("model.KJ", KJ)
@@ -175,19 +204,22 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
 
     ptype = _get(cfg, path, "planner", "type", "arimoto")
     duration = float(_get(cfg, path, "simulation", "duration", 0.4))
-    if not 0 < duration <= 600:
-        raise ConfigError(f"{path}: simulation.duration must be in (0, 600] s (a movement lasts seconds; "
-                          f"milliseconds?), got {duration}")
+    if not duration > 0:
+        raise ConfigError(f"{path}: simulation.duration must be positive [s], got {duration}")
+    _checked(path, check_seconds, "simulation.duration", duration, kind="duration")
     try:
         if ptype == "arimoto":
             k = _get(cfg, path, "planner", "k", None)
             tau = float(_get(cfg, path, "planner", "tau", 0.08))
+            _checked(path, check_seconds, "planner.tau", tau)
             planner = (ArimotoPlanner(k=float(k), tau=tau) if k is not None
                        else ArimotoPlanner(k=None, tau=tau, tau0=tau0 if tau0 is not None else tau))
         elif ptype == "constant":
             planner = ConstantPlanner(k=float(_get(cfg, path, "planner", "k")))
         elif ptype == "minimum_jerk":
-            planner = MinimumJerkPlanner(duration=float(_get(cfg, path, "planner", "duration", duration)))
+            T = float(_get(cfg, path, "planner", "duration", duration))
+            _checked(path, check_seconds, "planner.duration", T, kind="duration")
+            planner = MinimumJerkPlanner(duration=T)
         else:
             raise ConfigError(f"{path}: planner.type must be 'arimoto', 'constant' or 'minimum_jerk', got {ptype!r}")
     except ConfigError:
@@ -200,6 +232,7 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
         q0 = np.deg2rad(_array(path, "simulation.q0_deg", sim["q0_deg"], (n,)))
     else:
         q0 = _array(path, "simulation.q0", sim.get("q0", q_rest), (n,))
+        _checked(path, chain.check_angles, "simulation.q0", q0)
     targets = sim.get("targets", "center_out")
     if isinstance(targets, str):
         if targets != "center_out":
@@ -219,4 +252,9 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
     every = sim.get("save_every", 10)
     if not (isinstance(every, int) and every >= 1):
         raise ConfigError(f"{path}: simulation.save_every must be a positive integer, got {every!r}")
-    return model, planner, q0, targets, {"duration": duration, "dt": dt, "every": every, "names": names}
+    reach = sim.get("reach_tol", REACH_TOL)
+    if isinstance(reach, bool) or not isinstance(reach, int | float) or not 0 <= reach <= 1:
+        raise ConfigError(f"{path}: simulation.reach_tol must be a number in [0, 1] (the share of the start "
+                          f"distance to the target the hand may still be from it at the end), got {reach!r}")
+    return model, planner, q0, targets, {"duration": duration, "dt": dt, "every": every, "names": names,
+                                         "reach_tol": float(reach)}

@@ -20,7 +20,7 @@ import numpy as np
 from .._base.batching import broadcast_batch
 from .._base.linalg import mv, spd_inv, to_soa
 from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_spd, is_concrete, to_jax
+from .._base.validate import as_array, check_positive, check_seconds, check_spd, is_concrete, to_jax
 from .._chains.kinematics import Chain
 from .redundancy import admittance_terms_soa, lambda0_soa
 
@@ -44,6 +44,7 @@ class _PMP:
             KJ = as_array("KJ", self.KJ, tail=(n, n))
             check_spd("KJ", KJ)
             q_rest = as_array("q_rest", self.q_rest, tail=(n,))
+            self.chain.check_angles("q_rest", q_rest)
             object.__setattr__(self, "KJ", jnp.asarray(KJ, float))
             object.__setattr__(self, "q_rest", jnp.asarray(q_rest, float))
 
@@ -127,6 +128,8 @@ class Lambda0PMP(_PMP):
 
     ``chain``: a Chain; ``KJ`` (..., n, n) SPD joint stiffness [Nm/rad]; ``q_rest`` (..., n) rest
     posture [rad]; ``W`` (..., n, n) SPD joint damping [Nm s/rad]: array leaves. Leading axes batch.
+    A ``q_rest`` beyond the chain's range is refused or warned about as degrees typed as radians
+    (``Chain.check_angles``: on the wrist, beyond ±180° refused, beyond ±90° a warning).
     """
 
     chain: Chain
@@ -142,12 +145,14 @@ class Lambda0PMP(_PMP):
 
 def damping_from_stiffness(KJ, tau0):
     """``W = τ0 KJ`` (Eq 7) (..., n, n) [Nm s/rad]: damping proportional to stiffness ``KJ``
-    (..., n, n) [Nm/rad], intrinsic time constant ``tau0`` (...) [s] (positive)."""
+    (..., n, n) [Nm/rad], intrinsic time constant ``tau0`` (...) [s] (positive; above 10 s refused
+    as milliseconds, above 2 s a warning)."""
     KJ = as_array("KJ", KJ, tail=(None, None))
     if KJ.shape[-1] != KJ.shape[-2]:
         raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
     tau0 = as_array("tau0", tau0)
     check_positive("tau0", tau0)
+    check_seconds("tau0", tau0)
     if is_concrete(KJ, tau0):  # (on the host: no eager XLA op)
         return to_jax(np.asarray(tau0)[..., None, None] * np.asarray(KJ))
     return jnp.asarray(tau0)[..., None, None] * jnp.asarray(KJ)

@@ -14,7 +14,7 @@ import numpy as np
 from .._base.linalg import spd_solve
 from .._base.profiles import minimum_jerk_hazard
 from .._base.pytree import pytree_dataclass, replace, static_field
-from .._base.validate import as_array, check_positive
+from .._base.validate import as_array, check_positive, check_seconds
 
 
 def _scale(gain, e):
@@ -93,10 +93,11 @@ class ArimotoPlanner(Planner):
     """Arimoto stiffness ``K(t) = k (1 − e^{−t/τ} − (t/τ) e^{−t/τ}) I`` (Eq 8).
 
     ``k`` [N/m] and extrinsic time constant ``tau`` [s]. With ``k=None`` and ``tau0`` given, ``k``
-    is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``. ``delay`` [s]
-    (default 0): the target appeared ``delay`` before ``t = 0``, so ``K(t)`` is Eq 8 at ``t + delay``
-    (a model started at rest detected after the target's onset); a negative ``delay`` starts the
-    gain at ``t = −delay`` (zero before).
+    is set at the start of every movement by Eq 10: ``k = b_max(B(q0)) / τ0``. Time constants (and
+    ``|delay|``) above 10 s are refused as milliseconds (``tau=80`` for 80 ms), above 2 s they run
+    with a warning. ``delay`` [s] (default 0): the target appeared ``delay`` before ``t = 0``, so
+    ``K(t)`` is Eq 8 at ``t + delay`` (a model started at rest detected after the target's onset); a
+    negative ``delay`` starts the gain at ``t = −delay`` (zero before).
     """
 
     k: jax.Array | None
@@ -106,13 +107,16 @@ class ArimotoPlanner(Planner):
 
     def __post_init__(self):
         check_positive("tau", self.tau)
+        check_seconds("tau", self.tau)
         if self.k is None:
             if self.tau0 is None:
                 raise ValueError("ArimotoPlanner needs `k`, or `tau0` to set k by Eq 10")
             check_positive("tau0", self.tau0)
+            check_seconds("tau0", self.tau0)
         else:
             check_positive("k", self.k)
         as_array("delay", self.delay)
+        check_seconds("delay", self.delay)
 
     def start(self, M0):
         if self.k is None:
@@ -148,7 +152,8 @@ class MinimumJerkPlanner(Planner):
     ``1 − s ≈ 3 / (T gain_cap)`` for large caps) turns the end of the movement into an exponential
     approach at rate ``gain_cap`` and bounds the stiffness (RK4 needs ``dt < 2.5 / gain_cap``).
     ``γ`` is exact up to the cap and differentiable in ``t``, ``duration`` and ``gain_cap`` at every
-    ``t`` (see :func:`pmpjax._base.profiles.minimum_jerk_hazard`).
+    ``t`` (see :func:`pmpjax._base.profiles.minimum_jerk_hazard`). A ``duration`` above 60 s is
+    refused as milliseconds, above 10 s it runs with a warning.
     """
 
     duration: jax.Array
@@ -157,6 +162,7 @@ class MinimumJerkPlanner(Planner):
 
     def __post_init__(self):
         check_positive("duration", self.duration)
+        check_seconds("duration", self.duration, kind="duration")
         check_positive("gain_cap", self.gain_cap)
 
     def gain(self, t):

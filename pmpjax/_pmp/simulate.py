@@ -20,7 +20,15 @@ from .._base.compile import fast_compile_applies, fast_compile_jit, top_level
 from .._base.linalg import mv, to_soa
 from .._base.pytree import pytree_dataclass, replace
 from .._base.status import Status
-from .._base.validate import as_array, check_positive_int, is_concrete, positive_float, to_jax, warn_without_x64
+from .._base.validate import (
+    as_array,
+    check_positive_int,
+    check_seconds,
+    is_concrete,
+    positive_float,
+    to_jax,
+    warn_without_x64,
+)
 from .._chains.kinematics import manipulability_soa
 from .integrate import SOLVERS, integrate_adaptive, integrate_observed
 from .models import _PMP
@@ -29,6 +37,7 @@ from .redundancy import admittance_terms_soa
 
 OK, NONFINITE, SINGULAR = Status.SUCCESSFUL, Status.NONFINITE, Status.SINGULAR
 INACCURATE, INVALID_INPUT, MAX_STEPS = Status.INACCURATE, Status.INVALID_INPUT, Status.MAX_STEPS
+NOT_REACHED = Status.NOT_REACHED
 
 #: Default tolerances of ``simulate``'s error estimate: a trajectory is ``INACCURATE`` when its
 #: accumulated error estimate exceeds ``ATOL + RTOL·max|q|`` [rad] (at most 0.046° for joint
@@ -79,8 +88,9 @@ class Trajectory:
     (traced inputs that fail the checks an eager call raises on), ``MAX_STEPS`` (adaptive steps
     ran out), ``NONFINITE``, ``INACCURATE`` (``error_estimate > atol + rtol·max|q|``, ``max|q|``
     the largest joint angle of the start and the saved samples), ``SINGULAR`` (passed within
-    ``singular_tol`` of a rank-deficient Jacobian) or ``SUCCESSFUL``: finite, non-singular and
-    within tolerance.
+    ``singular_tol`` of a rank-deficient Jacobian), ``NOT_REACHED`` (only with ``simulate``'s
+    ``reach_tol``: the hand ended short of the target) or ``SUCCESSFUL``: finite, non-singular and
+    within tolerance (and, with ``reach_tol``, at the target).
     """
 
     t: jax.Array
@@ -279,10 +289,13 @@ def _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, s
     warn_without_x64()
     chain = model.chain
     n, m = chain.n, chain.m
-    q0 = to_jax(as_array("q0", q0, tail=(n,)), float)
+    q0 = as_array("q0", q0, tail=(n,))
+    chain.check_angles("q0", q0)
+    q0 = to_jax(q0, float)
     targets = to_jax(as_array("targets", targets, tail=(None, m)), float)
     chain.check_target("targets", targets)
     duration = positive_float("duration", duration)
+    check_seconds("duration", duration, kind="duration")
     saveat = saveat or SaveAt()
     batch = tuple(
         np.broadcast_shapes(q0.shape[:-1], targets.shape[:-2], model.batch_shape(), planner.batch_shape())
@@ -565,10 +578,21 @@ def _vmap_rule(statics, axis_size, in_batched, args):
 
 
 def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4, solver="rk4",
-             rtol=RTOL, atol=ATOL, max_steps=MAX_ADAPTIVE_STEPS):
+             rtol=RTOL, atol=ATOL, max_steps=MAX_ADAPTIVE_STEPS, reach_tol=None):
     """Simulate one movement (per batch element) from ``q0`` (..., n) to ``target`` (..., m).
 
     See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
+
+    ``reach_tol`` (default None: not judged): a movement whose hand ends farther from its target
+    than ``reach_tol`` times its distance at the start (``|x(T) − x_d| > reach_tol·|x(0) − x_d|``)
+    has status ``NOT_REACHED`` instead of ``SUCCESSFUL``: it did not reach the target within
+    ``duration`` (time constants in milliseconds, a planner too slow for the duration; PMP2, which
+    stops short by design). The hand at the end must be saved (every ``saveat`` but ``ts`` that
+    end before ``duration``). The command line and sweeps use 0.1.
+
+    ``q0`` beyond the chain's joint range (``Chain.check_angles``: degrees typed as radians) and
+    a ``duration`` above 60 s (milliseconds typed as seconds) are refused, a ``duration`` above
+    10 s runs with a warning.
 
     **Compile time:** the first call with a new batch shape, ``duration``/``dt``, ``saveat`` or
     model type compiles the whole RK4 scan: ≈ 3 s on a 2-core CPU at the Figure-3 size (8
@@ -580,8 +604,32 @@ def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, sing
     if not isinstance(model, _PMP):
         raise TypeError(f"`model` must be PMP1, PMP2 or Lambda0PMP, got {type(model).__name__}")
     target = as_array("target", target, tail=(model.chain.m,))
-    return _simulate(model, planner, q0, on_host(target, lambda a: a[..., None, :]), duration, dt, saveat,
+    if reach_tol is not None:
+        reach_tol = _tolerance("reach_tol", reach_tol)
+        if saveat is not None and saveat.ts is not None and saveat.ts[-1] < float(duration) * (1 - 1e-12):
+            raise ValueError("`reach_tol` judges the hand at the end of the movement: save it (`saveat.ts` ending "
+                             "at `duration`, or another SaveAt)")
+    traj = _simulate(model, planner, q0, on_host(target, lambda a: a[..., None, :]), duration, dt, saveat,
                      singular_tol, True, solver, rtol, atol, max_steps)
+    if reach_tol is None:
+        return traj
+    return replace(traj, status=_judge_reach(model.chain, traj, q0, target, reach_tol))
+
+
+def _judge_reach(chain, traj, q0, target, reach_tol):
+    """``traj.status`` with ``NOT_REACHED`` where a ``SUCCESSFUL`` movement's hand ended farther from
+    ``target`` than ``reach_tol`` times its start distance (``simulate``'s ``reach_tol``)."""
+    x0 = chain.fk(q0)
+    if is_concrete(traj.x, traj.status, x0, target):
+        xp, x_end, x0, target, status = np, np.asarray(traj.x[..., -1, :]), np.asarray(x0), np.asarray(target), \
+            np.asarray(traj.status)
+    else:
+        xp, x_end, status = jnp, traj.x[..., -1, :], traj.status
+    d_end = xp.linalg.norm(x_end - target, axis=-1)
+    d0 = xp.linalg.norm(x0 - target, axis=-1)
+    short = xp.broadcast_to(d_end > reach_tol * d0 + 1e-12 * (1.0 + d0), status.shape)
+    status = xp.where((status == int(OK)) & short, int(NOT_REACHED), status)
+    return to_jax(status) if xp is np else status
 
 
 #: Most consecutive samples written to the trajectory-major outputs at once: one sample per
