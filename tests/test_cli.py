@@ -344,8 +344,8 @@ def test_an_interrupted_run_keeps_the_parts_already_written(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"})
     results = tmp_path / "results.json"
     try:
-        deadline = time.time() + 240
-        while time.time() < deadline:
+        deadline = time.monotonic() + 600  # (generous: matters only when something is wrong)
+        while time.monotonic() < deadline:
             if results.exists() and "figure4" in json.loads(results.read_text()):
                 break
             assert proc.poll() is None, "the run ended before it could be interrupted"
@@ -374,11 +374,17 @@ def test_stopping_the_command_stops_its_worker_processes(tmp_path, stop):
     """SIGTERM to ``reproduce`` (a job scheduler's timeout, ``kill``) or Ctrl-C (SIGINT to the
     terminal's process group: the command and its workers) must not leave its spawned workers
     computing: they stop with it; Ctrl-C ends with one line and exit status 130, no traceback."""
+    # Each part announces it runs by a file, then waits for one that never comes: the test stops
+    # the command once both run, whatever the load (no race with a sleep).
     (tmp_path / "sleepers.py").write_text(textwrap.dedent(f"""
         import os, time
         def sleeper(ctx):
-            open(os.path.join({str(tmp_path)!r}, f"worker-{{os.getpid()}}.pid"), "w").close()
-            time.sleep(300)
+            here = {str(tmp_path)!r}
+            tmp = os.path.join(here, f"{{os.getpid()}}.tmp")
+            open(tmp, "w").close()
+            os.replace(tmp, os.path.join(here, f"worker-{{os.getpid()}}.pid"))
+            while not os.path.exists(os.path.join(here, "never")):
+                time.sleep(0.05)
     """))
     script = textwrap.dedent(f"""
         import sys
@@ -392,21 +398,23 @@ def test_stopping_the_command_stops_its_worker_processes(tmp_path, stop):
     proc = subprocess.Popen([sys.executable, "-c", script], env={**os.environ, "MPLBACKEND": "Agg"},
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     pids = []
+    # Generous limits: they only matter when something is wrong (spawning two workers that import
+    # JAX on two loaded cores can take minutes; stopping takes seconds).
     try:
-        deadline = time.time() + 120
+        deadline = time.monotonic() + 600
         while len(pids) < 2:
-            assert time.time() < deadline, "the workers never started"
+            assert time.monotonic() < deadline, "the workers never started"
             assert proc.poll() is None, "the run ended before it could be stopped"
-            time.sleep(0.2)
+            time.sleep(0.1)
             pids = [int(f.stem.split("-")[1]) for f in tmp_path.glob("worker-*.pid")]
         if stop == "SIGTERM":
             proc.send_signal(signal.SIGTERM)
         else:
             os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-        deadline = time.time() + 30
-        while any(_alive(p) for p in pids) and time.time() < deadline:
-            time.sleep(0.2)
+        _, err = proc.communicate(timeout=300)
+        deadline = time.monotonic() + 120
+        while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
         assert not any(_alive(p) for p in pids), "worker processes outlived the stopped command"
         if stop == "Ctrl-C":
             assert proc.returncode == 130, err
