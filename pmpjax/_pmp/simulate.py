@@ -50,8 +50,16 @@ MAX_ADAPTIVE_STEPS = 4096
 
 @dataclasses.dataclass(frozen=True)
 class SaveAt:
-    """Where to save: every ``every``-th RK4 step (default every step, with t = 0 included),
-    at given times ``ts`` (strictly increasing in [0, duration]), or only at the end (``final``).
+    """Where :func:`simulate` saves the state.
+
+    **Arguments:**
+
+    - ``every``: every ``every``-th step (default every step, with t = 0 included), or
+    - ``ts``: at given times [s], strictly increasing in [0, duration], or
+    - ``final``: only at the end.
+
+    Give one of them. Construction raises ``ValueError`` for more than one, or ``ts`` that are not
+    finite, non-negative and strictly increasing.
     """
 
     every: int | None = None
@@ -235,37 +243,58 @@ def simulate_sequence(
     atol: float = ATOL,
     max_steps: int = MAX_ADAPTIVE_STEPS,
 ) -> Trajectory:
-    """Simulate consecutive movements to ``targets`` (..., M, m), each lasting ``duration`` [s].
+    """Simulate consecutive movements to ``targets``, each lasting ``duration``.
 
     Each movement starts where the previous one ended, with the planner's time reset to 0 (and
-    Eq 10 gains recomputed at its start posture). ``q0`` (..., n) [rad]; leading axes of ``q0``,
-    ``targets`` and of the model's and planner's parameters broadcast together as a batch.
-    Returns a :class:`Trajectory` with leaves (..., M, S, ·). Differentiable with respect to every
-    array leaf and to ``q0``/``targets``; ``duration``, ``dt``, ``saveat`` and ``solver`` are static.
+    Eq 10 gains recomputed at its start posture). Leading axes of ``q0``, ``targets`` and of the
+    model's and planner's parameters broadcast together as a batch. Differentiable with respect to
+    every array leaf and to ``q0``/``targets``; ``duration``, ``dt``, ``saveat`` and ``solver`` are
+    static.
 
-    ``solver``: ``"rk4"`` (classical RK4; refuses a ``dt`` far outside its stability region at
-    ``q0``) or ``"rodas4"`` (L-stable Rosenbrock, order 4: for stiff movements, e.g. Eq 10's gain
-    with anisotropic ``KJ``, where it takes steps 10–100× larger than RK4 could; each step costs
-    about two RK4 steps). See ``pmpjax._pmp.integrate`` and ``benchmarks/stiff.py``. Stability is
-    not accuracy: a step too coarse for the nonlinear field gives a wrong answer with either
-    solver, which the error estimate reports (``INACCURATE``).
+    ``solver="rk4"`` (classical RK4) refuses a ``dt`` far outside its stability region at ``q0``;
+    ``"rodas4"`` (L-stable Rosenbrock, order 4) is for stiff movements, e.g. Eq 10's gain with
+    anisotropic ``KJ``, where it takes steps 10–100× larger than RK4 could; each step costs about two
+    RK4 steps (``pmpjax._pmp.integrate``, ``benchmarks/stiff.py``). Stability is not accuracy: a step
+    too coarse for the nonlinear field gives a wrong answer with either solver, which the error
+    estimate reports (``INACCURATE``). ``dt=None`` selects adaptive steps: each trajectory's step is
+    set by a PI controller so that its local error estimates sum to at most ``atol + rtol·|q|`` over
+    the movement, landing on every save time; adaptive runs save at ``saveat.ts``, at the end
+    (``final``) or by default at 101 equally spaced times, and support forward-mode derivatives
+    (``jax.jvp``, ``jax.jacfwd``) but not ``jax.grad`` (a ``while_loop``). Fixed steps are the
+    default: on the benchmark's workloads they are as accurate at a lower cost
+    (``benchmarks/accuracy.py``). Inside a caller's ``jit``/``vmap`` the input checks that an eager
+    call raises on become per-item ``INVALID_INPUT`` statuses. Saved samples come from the step's
+    first stage (no extra field evaluations when saving every step) and are written in place in the
+    output layout, so saving costs about the memory it fills (``benchmarks/simulate.py --saves``).
 
-    ``dt`` [s]: the fixed step (default 1 ms; each save interval gets equal steps of at most
-    ``dt``), or ``None`` for adaptive steps: each trajectory's step is set by a PI controller so
-    that its local error estimates sum to at most ``atol + rtol·|q|`` over the movement, landing on
-    every save time; ``max_steps`` (default 4 096) steps tried per movement, else ``MAX_STEPS``.
-    Adaptive runs save at ``saveat.ts``, at the end (``final``) or by default at 101 equally
-    spaced times; they support forward-mode derivatives (``jax.jvp``, ``jax.jacfwd``) but not
-    ``jax.grad`` (a ``while_loop``). Fixed steps are the default: on the benchmark's workloads
-    they are as accurate at a lower cost (``benchmarks/accuracy.py``).
+    **Arguments:**
 
-    ``rtol``, ``atol`` [rad]: tolerances of the error estimate (defaults ``1e-4`` and ``5e-4``: at
-    most 0.046° for joint angles within ±π). Inside a caller's ``jit``/``vmap`` the input checks
-    that an eager call raises on become per-item ``INVALID_INPUT`` statuses.
+    - ``model``: a :class:`Lambda0PMP`, :class:`PMP1` or :class:`PMP2` (the chain, ``KJ``, ``q_rest``,
+      ``W``).
+    - ``planner``: a :class:`Planner` (:class:`ArimotoPlanner`, :class:`MinimumJerkPlanner`,
+      :class:`ConstantPlanner`).
+    - ``q0``: (..., n) start posture [rad].
+    - ``targets``: (..., M, m) the M targets in task space (wrist: screen points [m]).
+    - ``duration``: length of each movement [s].
+    - ``dt``: the fixed step [s] (default 1 ms; each save interval gets equal steps of at most
+      ``dt``), or ``None`` for adaptive steps.
+    - ``saveat``: a :class:`SaveAt` (default: every step, t = 0 included).
+    - ``singular_tol``: ``SINGULAR`` when a movement passes within this of a rank-deficient Jacobian.
+    - ``solver``: ``"rk4"`` or ``"rodas4"`` (:data:`SOLVERS`).
+    - ``rtol``, ``atol``: relative and absolute tolerance [rad] of the error estimate (defaults
+      ``1e-4`` and ``5e-4``: at most 0.046° for joint angles within ±π).
+    - ``max_steps``: adaptive steps tried per movement (default 4 096), else ``MAX_STEPS``.
 
-    Saved samples come from the step's first stage (no extra field evaluations when saving every
-    step) and are written in place in the output layout, so saving costs about the memory it fills
-    (``benchmarks/simulate.py --saves``).
+    **Returns:**
+
+    A :class:`Trajectory` with leaves (..., M, S, ·) and a ``status`` per batch item.
+
+    **Raises:**
+
+    - ``TypeError`` for a model or planner of the wrong type; ``ValueError`` naming the argument for
+      wrong shapes, NaN/inf, an unknown ``solver``, an RK4 ``dt`` outside its stability region,
+      ``saveat`` times beyond ``duration``, a start at a singular posture, or a saved trajectory
+      larger than the available memory.
     """
     return _simulate(model, planner, q0, targets, duration, dt, saveat, singular_tol, False, solver, rtol, atol,
                      max_steps)
@@ -579,25 +608,40 @@ def _vmap_rule(statics, axis_size, in_batched, args):
 
 def simulate(model, planner, q0, target, *, duration, dt=1e-3, saveat=None, singular_tol=1e-4, solver="rk4",
              rtol=RTOL, atol=ATOL, max_steps=MAX_ADAPTIVE_STEPS, reach_tol=None):
-    """Simulate one movement (per batch element) from ``q0`` (..., n) to ``target`` (..., m).
+    """Simulate one movement (per batch element) from ``q0`` to ``target`` (λ0-PMP, Eqs 1–10).
 
-    See :func:`simulate_sequence`; returns a :class:`Trajectory` with leaves (..., S, ·).
+    As :func:`simulate_sequence` with one target; see it for the solvers, adaptive steps and
+    derivatives.
 
-    ``reach_tol`` (default None: not judged): a movement whose hand ends farther from its target
-    than ``reach_tol`` times its distance at the start (``|x(T) − x_d| > reach_tol·|x(0) − x_d|``)
-    has status ``NOT_REACHED`` instead of ``SUCCESSFUL``: it did not reach the target within
-    ``duration`` (time constants in milliseconds, a planner too slow for the duration; PMP2, which
-    stops short by design). The hand at the end must be saved (every ``saveat`` but ``ts`` that
-    end before ``duration``). The command line and sweeps use 0.1.
+    **Arguments:**
 
-    ``q0`` beyond the chain's joint range (``Chain.check_angles``: degrees typed as radians) and
-    a ``duration`` above 60 s (milliseconds typed as seconds) are refused, a ``duration`` above
-    10 s runs with a warning.
+    - ``model``: a :class:`Lambda0PMP`, :class:`PMP1` or :class:`PMP2`.
+    - ``planner``: a :class:`Planner`.
+    - ``q0``: (..., n) start posture [rad].
+    - ``target``: (..., m) the target in task space (wrist: screen point [m]).
+    - ``duration``, ``dt``, ``saveat``, ``singular_tol``, ``solver``, ``rtol``, ``atol``,
+      ``max_steps``: as :func:`simulate_sequence`.
+    - ``reach_tol``: (default None: not judged) a movement whose hand ends farther from its target
+      than ``reach_tol`` times its distance at the start (``|x(T) − x_d| > reach_tol·|x(0) − x_d|``)
+      has status ``NOT_REACHED`` instead of ``SUCCESSFUL``: it did not reach the target within
+      ``duration`` (time constants in milliseconds, a planner too slow for the duration; PMP2, which
+      stops short by design). The hand at the end must be saved (every ``saveat`` but ``ts`` that
+      end before ``duration``). The command line and sweeps use 0.1.
 
-    **Compile time:** the first call with a new batch shape, ``duration``/``dt``, ``saveat`` or
-    model type compiles the whole RK4 scan: ≈ 3 s on a 2-core CPU at the Figure-3 size (8
-    movements; up to 1 024 movements the compile-light kernel, was 3.4–4.5 s), ≈ 12 s for
-    ``jax.grad`` through it (idle; benchmarks/compile_times.py). Later calls reuse it; turn on JAX's
+    **Returns:**
+
+    A :class:`Trajectory` with leaves (..., S, ·): ``t``, ``q``, ``x``, ``qdot``, ``xdot``,
+    ``manipulability``, ``error_estimate`` and ``status``.
+
+    **Raises:**
+
+    - As :func:`simulate_sequence`; also ``ValueError`` for a ``q0`` beyond the chain's joint range
+      (``Chain.check_angles``: degrees typed as radians), a ``duration`` above 60 s (milliseconds
+      typed as seconds; above 10 s runs with a warning), or a ``reach_tol`` whose end is not saved.
+
+    **Compile time:** the first call with a new batch shape, ``duration``/``dt``, ``saveat`` or model
+    type compiles the whole scan: ≈ 3 s on a 2-core CPU at the Figure-3 size (8 movements), ≈ 12 s
+    for ``jax.grad`` through it (benchmarks/compile_times.py). Later calls reuse it; turn on JAX's
     persistent compilation cache (``jax_compilation_cache_dir``; the command line does) to keep it
     across processes.
     """
