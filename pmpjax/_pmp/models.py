@@ -108,8 +108,8 @@ class PMP1(_PMP):
 class PMP2(_PMP):
     """Visco-elastic PMP: ``q̇ = W⁻¹ (Jᵀ F − KJ (q − q_rest))``. Unique postures, misses targets.
 
-    ``KJ`` (..., n, n) SPD [Nm/rad], ``q_rest`` (..., n) [rad], ``W`` (..., n, n) SPD [Nm s/rad]:
-    array leaves (vmappable, differentiable).
+    ``chain``: a Chain; ``KJ`` (..., n, n) SPD [Nm/rad], ``q_rest`` (..., n) [rad], ``W`` (..., n, n)
+    SPD [Nm s/rad]: array leaves (vmappable, differentiable).
     """
 
     chain: Chain
@@ -144,9 +144,23 @@ class Lambda0PMP(_PMP):
 
 
 def damping_from_stiffness(KJ, tau0):
-    """``W = τ0 KJ`` (Eq 7) (..., n, n) [Nm s/rad]: damping proportional to stiffness ``KJ``
-    (..., n, n) [Nm/rad], intrinsic time constant ``tau0`` (...) [s] (positive; above 10 s refused
-    as milliseconds, above 2 s a warning)."""
+    """Damping proportional to stiffness, ``W = τ0 KJ`` (Eq 7).
+
+    **Arguments:**
+
+    - ``KJ``: (..., n, n) joint stiffness [Nm/rad].
+    - ``tau0``: (...) intrinsic time constant [s], positive (above 10 s refused as milliseconds
+      typed as seconds, above 2 s a warning).
+
+    **Returns:**
+
+    (..., n, n) joint damping ``W`` [Nm s/rad].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a non-square ``KJ``, NaN/inf, or a non-positive or
+      too large ``tau0``.
+    """
     KJ = as_array("KJ", KJ, tail=(None, None))
     if KJ.shape[-1] != KJ.shape[-2]:
         raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")
@@ -159,7 +173,21 @@ def damping_from_stiffness(KJ, tau0):
 
 
 def normalize_trace(KJ, trace: float = 4.0):
-    """Scale ``KJ`` (..., n, n) to ``trace(KJ) = trace`` (paper: 4 Nm/rad; only ratios matter)."""
+    """Scale ``KJ`` to a given trace (the paper uses 4 Nm/rad; only the eigenvalue ratios matter).
+
+    **Arguments:**
+
+    - ``KJ``: (..., n, n) joint stiffness [Nm/rad] with positive trace.
+    - ``trace``: the target trace [Nm/rad], positive.
+
+    **Returns:**
+
+    (..., n, n) ``KJ · trace / tr(KJ)``.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a non-square ``KJ``, NaN/inf, or a non-positive trace.
+    """
     KJ = as_array("KJ", KJ, tail=(None, None))
     if KJ.shape[-1] != KJ.shape[-2]:
         raise ValueError(f"`KJ` must be square (..., n, n), got shape {KJ.shape}")

@@ -76,8 +76,23 @@ class ConstantPlanner(Planner):
 
 
 def eq10_gain(M0, tau0):
-    """``k = b_max / τ0`` (Eq 10) [N/m] from ``M0 = B(q0)⁻¹ = J W⁻¹ Jᵀ`` (m, m, ...) (component-leading:
-    the batch trails) and ``tau0`` (...) [s]: ``b_max = 1/λ_min(M0)``."""
+    """The Arimoto gain of Eq 10, ``k = b_max / τ0`` with ``b_max = 1/λ_min(M0)``.
+
+    **Arguments:**
+
+    - ``M0``: (m, m, ...) ``B(q0)⁻¹ = J W⁻¹ Jᵀ`` at the start posture, component-leading (the batch
+      trails).
+    - ``tau0``: (...) intrinsic time constant [s], positive.
+
+    **Returns:**
+
+    (...) the gain ``k`` [N/m].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for an ``M0`` that is not component-leading square, or a
+      non-positive ``tau0``.
+    """
     M0 = as_array("M0", M0)
     if M0.ndim < 2 or M0.shape[0] != M0.shape[1]:
         raise ValueError(f"`M0` must be a component-leading square matrix (m, m, ...), got shape {M0.shape}")
@@ -152,8 +167,11 @@ class MinimumJerkPlanner(Planner):
     ``1 − s ≈ 3 / (T gain_cap)`` for large caps) turns the end of the movement into an exponential
     approach at rate ``gain_cap`` and bounds the stiffness (RK4 needs ``dt < 2.5 / gain_cap``).
     ``γ`` is exact up to the cap and differentiable in ``t``, ``duration`` and ``gain_cap`` at every
-    ``t`` (see :func:`pmpjax._base.profiles.minimum_jerk_hazard`). A ``duration`` above 60 s is
+    ``t`` (see ``pmpjax._base.profiles.minimum_jerk_hazard``). A ``duration`` above 60 s is
     refused as milliseconds, above 10 s it runs with a warning.
+
+    **Fields:** ``duration`` ``T`` [s]; ``gain_cap`` [1/s]; ``task_velocity`` (static, set by the
+    class) marks the task-velocity form ``F = γ B (x_d − x)`` for ``simulate``'s stability check.
     """
 
     duration: jax.Array
