@@ -47,6 +47,7 @@ from ._base.trig import sincos as sincos
 
 # Input validation: clear errors naming the argument, raised before tracing
 from ._base.validate import as_array as as_array
+from ._base.validate import as_prng_key as as_prng_key
 from ._base.validate import check_finite_masked as check_finite_masked
 from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int

@@ -669,8 +669,10 @@ def test_generators_bad_input():
         fitting.ik_fig1_data(key, n_reps=0)
     with pytest.raises(ValueError, match="sigma"):
         fitting.ik_fig1_data(key, sigma=-1.0)
-    with pytest.raises(TypeError, match="key"):
-        fitting.ik_fig1_data(0)
+    with pytest.raises(TypeError, match="seed"):
+        fitting.ik_fig1_data(0.5)
+    with pytest.warns(DeprecationWarning, match="key"), pytest.raises(TypeError, match="seed"):
+        fitting.ik_fig1_data(key="0")  # the old keyword, passed on under the new one
     with pytest.raises(ValueError, match="w_true"):
         fitting.ik_fig3_data(w_true=(1.0, 0.5, 0.2))
     with pytest.raises(ValueError, match="dt"):
@@ -679,3 +681,10 @@ def test_generators_bad_input():
         fitting.ik_fig3_data(k_null=-1.0)
     with pytest.raises(ValueError, match="q0"):
         fitting.ik_fig3_data(q0=(0.5,))
+
+
+def test_fig1_data_seed_is_an_integer_or_a_key():
+    """``seed=3`` draws what ``jax.random.PRNGKey(3)`` draws (the documented meaning of an integer)."""
+    a = fitting.ik_fig1_data(3, n_reps=1, K=4)
+    b = fitting.ik_fig1_data(jax.random.PRNGKey(3), n_reps=1, K=4)
+    assert all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b, strict=True))

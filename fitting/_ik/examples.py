@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import check_positive_int, check_prng_key, fast_compile_jit
+from pmpjax.internal import as_prng_key, check_positive_int, fast_compile_jit, renamed_keywords
 
 FIG1_W = (1.0, 0.8, 0.6, 0.4, 0.2)
 
@@ -34,10 +34,12 @@ def _weights(w_true, n_min=2):
     return w
 
 
-def ik_fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
+@renamed_keywords(key="seed")
+def ik_fig1_data(seed=0, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
     """Random data of Fig 1: returns ``qdot`` (R, K, n), ``xdot`` (R, K, m), ``J`` (R, K, m, n).
 
-    ``key`` a JAX PRNG key; ``n_reps`` R repetitions; ``K`` samples each; ``w_true`` (n,) the
+    ``seed`` an integer or a JAX PRNG key (an integer gives ``jax.random.PRNGKey(seed)``);
+    ``n_reps`` R repetitions; ``K`` samples each; ``w_true`` (n,) the
     weights ``W* = diag(w_true)``; ``m < n`` task dimensions; ``sigma`` ≥ 0 the null-space scale.
     """
     w = _weights(w_true)
@@ -46,7 +48,7 @@ def ik_fig1_data(key, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int 
         raise ValueError(f"`m` must be smaller than n = {w.size} (a redundant chain), got {m}")
     if not (np.isfinite(float(sigma)) and float(sigma) >= 0):
         raise ValueError(f"`sigma` must be a finite number >= 0, got {sigma}")
-    check_prng_key("key", key)
+    key = as_prng_key("seed", seed)
     return _fig1_data(key, jnp.asarray(w), jnp.asarray(float(sigma)), n_reps=n_reps, K=K, m=m)
 
 

@@ -120,6 +120,19 @@ def check_prng_key(name: str, key: Any) -> None:
     raise TypeError(f"`{name}` must be one JAX PRNG key (jax.random.PRNGKey(seed)), got {key!r}")
 
 
+def as_prng_key(name: str, seed: Any):
+    """The JAX PRNG key of ``seed``: an integer gives ``jax.random.PRNGKey(seed)``, one key is passed
+    through; ``TypeError`` naming ``name`` for anything else."""
+    if isinstance(seed, int | np.integer) and not isinstance(seed, bool):
+        return jax.random.PRNGKey(int(seed))
+    try:
+        check_prng_key(name, seed)
+    except TypeError:
+        raise TypeError(f"`{name}` must be an integer or one JAX PRNG key (jax.random.PRNGKey(seed)), "
+                        f"got {seed!r}") from None
+    return seed
+
+
 def _fmt(tail: tuple[int | None, ...]) -> str:
     return "(..., " + ", ".join("?" if t is None else str(t) for t in tail) + ")"
 
