@@ -142,10 +142,23 @@ class Chain:
 
 
 def manipulability(chain: Chain, q):
-    """Yoshikawa manipulability ``sqrt(det(J Jᵀ))`` (...,) at ``q`` (..., n).
+    """Yoshikawa manipulability ``sqrt(det(J Jᵀ))`` of a chain at postures ``q``.
 
     It falls to zero where the Jacobian loses rank (wrist: pointing at the rim of the screen
     hemisphere, which includes gimbal lock FE = ±90°), so it is the detector for singular postures.
+
+    **Arguments:**
+
+    - ``chain``: a :class:`Chain`.
+    - ``q``: (..., n) postures [rad].
+
+    **Returns:**
+
+    (...,) manipulability (units of ``x`` per radian to the power m).
+
+    **Raises:**
+
+    - ``TypeError`` for a non-chain; ``ValueError`` naming ``q`` for a wrong trailing shape or NaN/inf.
     """
     if not isinstance(chain, Chain):
         raise TypeError(f"`chain` must be a pmpjax Chain, got {type(chain).__name__}")
@@ -184,6 +197,10 @@ class Wrist(Chain):
     Joint angles beyond ±π (180°: no wrist joint turns that far from neutral) are refused as
     degrees typed as radians, and beyond ±π/2 (90°, the end of the human range of pronation)
     they run with a warning (``angle_error``, ``angle_limit``).
+
+    **Fields:** ``d`` screen distance [m] (array leaf: differentiable, vmappable); ``max_angle``
+    [rad] the largest pointing angle ``reachable`` accepts; ``n`` = 3 joints and ``m`` = 2 task
+    dimensions (fixed).
     """
 
     angle_error = float(np.pi)
@@ -272,7 +289,17 @@ class PlanarArm(Chain):
 class FunctionChain(Chain):
     """Chain from a user JAX function ``fk(q)`` (n,) -> (m,); Jacobian by ``jax.jacfwd``.
 
-    ``reach`` optionally maps task points (..., m) to a boolean mask of reachable points.
+    **Arguments:**
+
+    - ``fn``: the forward kinematics, a JAX function of one posture ``q`` (n,) [rad] returning the
+      task point (m,).
+    - ``n``: number of joints.
+    - ``m``: task dimensions.
+    - ``reach``: optional function mapping task points (..., m) to a boolean mask of reachable
+      points (targets outside it are refused by name).
+
+    Construction raises ``TypeError`` for a non-callable ``fn`` and ``ValueError`` when ``fn`` does
+    not map (n,) to (m,).
     """
 
     fn: Callable = static_field()

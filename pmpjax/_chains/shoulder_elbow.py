@@ -42,6 +42,8 @@ class ShoulderElbowArm(Chain):
     The Jacobian loses rank with the elbow straight (q4 = 0). Joint angles beyond ±π (180°, past
     the human range of every joint of the arm) run with a warning, beyond ±2π they are refused
     (``angle_limit``, ``angle_error``: degrees typed as radians).
+
+    **Fields:** ``L1``, ``L2`` [m]; ``n`` = 4 joints and ``m`` = 3 task dimensions (fixed).
     """
 
     angle_limit = float(np.pi)
