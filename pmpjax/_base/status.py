@@ -50,7 +50,20 @@ _MESSAGES = {
 
 
 def status_message(code) -> str | list:
-    """Message for a status code, or a nested list of messages for an array of codes."""
+    """What a status code means.
+
+    **Arguments:**
+
+    - ``code``: a :class:`Status` code (int), or an array of them.
+
+    **Returns:**
+
+    The message (str) of a scalar code, or a nested list of messages shaped like the array.
+
+    **Raises:**
+
+    - ``ValueError`` for an integer that is not a status code.
+    """
     arr = np.asarray(code)
     if arr.ndim == 0:
         return Status(int(arr)).message

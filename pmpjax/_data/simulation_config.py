@@ -138,9 +138,28 @@ def check_keys(cfg: dict, path, extra_tables=()) -> None:
 
 
 def read_simulation_config(path):
-    """``(model, planner, q0, targets, options)`` of a simulation file (TOML or JSON, the format of
-    ``pmpjax simulate``; ``options``: ``duration``, ``dt``, ``every``, ``names``, ``reach_tol``). Raises
-    ``ValueError`` naming the file and the key (unknown keys too)."""
+    """Read a simulation file (TOML or JSON, the format of ``pmpjax simulate``) into the arguments
+    of :func:`simulate`.
+
+    The file has tables ``[chain]`` (``"wrist"``, Eq 6, with ``d`` [m], or ``"planar"`` with
+    ``lengths`` [m]), ``[model]`` (``"lambda0"``, ``"pmp1"``, ``"pmp2"``), ``[planner]``
+    (``"arimoto"``, Eq 8, ``"constant"``, ``"minimum_jerk"``) and ``[simulation]``; see
+    ``pmpjax/data/examples/simulate_figure3.toml``.
+
+    **Arguments:**
+
+    - ``path``: the ``.toml`` or ``.json`` file.
+
+    **Returns:**
+
+    ``(model, planner, q0, targets, options)``: the model, the planner, the start posture (n,) [rad],
+    the targets (P, m) and ``options`` with ``duration``, ``dt``, ``every``, ``names`` and
+    ``reach_tol``.
+
+    **Raises:**
+
+    - ``ValueError`` (``ConfigError``) naming the file and the key, unknown keys too.
+    """
     return build_simulation(read_config(path), path)
 
 

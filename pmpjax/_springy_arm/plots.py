@@ -18,7 +18,20 @@ def _check_joint(joint, n: int, name: str = "joint") -> int:
 
 
 def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
-    """Figure 4: the individual moves' set-points and velocities (thin) and their sum (dotted)."""
+    """Williamson (1996) Figure 4: the individual moves' set-points and velocities (thin) and their
+    sum (dotted), for one joint.
+
+    **Arguments:**
+
+    - ``moves``: the :class:`Moves`.
+    - ``start``: (n,) the set-point before the first move [rad].
+    - ``t``: (T,) times [s].
+    - ``joint``: the joint drawn (index).
+
+    **Returns:**
+
+    The matplotlib figure.
+    """
     import matplotlib.pyplot as plt
 
     p_all, v_all = summed_moves(moves, start, t)  # validates moves, start, t
@@ -44,8 +57,26 @@ def plot_summed_moves(moves: Moves, start, t, *, joint: int = 0):
 
 
 def plot_reflex(traj: ArmTrajectory, *, joint: int = 0, sensor: str = "palm", title: str = ""):
-    """Figures 8–10: sensor trace on top (touch [N], or the joint torque and its lead reference
-    for ``sensor="torque"``), set-point (solid) and actual joint angle (dashed) below."""
+    """Williamson (1996) Figures 8–10: a reflex run's sensor trace on top (touch [N], or the joint
+    torque and its lead reference for ``sensor="torque"``), set-point (solid) and actual joint angle
+    (dashed) below.
+
+    **Arguments:**
+
+    - ``traj``: one arm's :class:`ArmTrajectory` (from :func:`run_reflexes`; index a batch first).
+    - ``joint``: the joint drawn (index).
+    - ``sensor``: ``"palm"``, ``"back"`` or ``"torque"``.
+    - ``title``: the figure's title.
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-trajectory; ``ValueError`` naming the argument for a batched
+      trajectory, a joint index out of range or an unknown ``sensor``.
+    """
     import matplotlib.pyplot as plt
 
     if not isinstance(traj, ArmTrajectory):
@@ -78,9 +109,31 @@ def plot_reflex(traj: ArmTrajectory, *, joint: int = 0, sensor: str = "palm", ti
 
 
 def plot_force_field(chain, q_set, K, *, joints=(0, 3), span: float = 0.6, n: int = 9, gravity: bool = False):
-    """Force field of the posture ``q_set`` in the sagittal (x, z) plane: the two ``joints`` are
-    swept ±``span`` rad around the set-point (the others held), and ``F`` from ``Jᵀ F = τ``
-    (least squares) is drawn at the hand (paper Section 2.2, frog-leg fields of Figure 2)."""
+    """Williamson (1996) Figure 2: the force field of a posture in the sagittal (x, z) plane.
+
+    The two ``joints`` are swept ±``span`` rad around the set-point (the others held), and the hand
+    force ``F`` from ``Jᵀ F = τ`` (least squares, :func:`force_field`) is drawn at the hand: the
+    frog-leg fields of the paper's Section 2.2.
+
+    **Arguments:**
+
+    - ``chain``: the arm's hand site as a :class:`MjcfChain` (``pj.MjcfChain(arm, "hand")``).
+    - ``q_set``: (n,) the set-point [rad].
+    - ``K``: (n,) joint stiffness [Nm/rad].
+    - ``joints``: the two joints swept (indices).
+    - ``span``: half-width of the sweep [rad].
+    - ``n``: postures per joint.
+    - ``gravity``: include the gravity torque.
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-``MjcfChain``; ``ValueError`` naming the argument for a batched
+      ``q_set``, joints that are not two different indices in range, or as :func:`force_field`.
+    """
     import matplotlib.pyplot as plt
 
     if not isinstance(chain, MjcfChain):
