@@ -11,10 +11,30 @@ HUGMP_JOINTS = pj.ShoulderElbowArm.joint_names
 
 def plot_ik_weights(w, lo=None, hi=None, *, groups=None, panels=None, joints=HUGMP_JOINTS,
                     ax=None, title=None):
-    """Grouped bar chart of weights ``w`` (P, G, n) with percentile intervals ``lo``/``hi``.
+    """Grouped bar chart of IK weights with percentile intervals.
 
-    One panel per row of ``w`` (e.g. subjects, names in ``panels``), one bar group per column
-    (e.g. tasks, names in ``groups``), one bar per joint. Returns the matplotlib figure.
+    One panel per row of ``w`` (e.g. subjects), one bar group per column (e.g. tasks), one bar per
+    joint.
+
+    **Arguments:**
+
+    - ``w``: (P, G, n) or (G, n) weights.
+    - ``lo``, ``hi``: optional intervals of the shape of ``w`` (e.g. bootstrap percentiles), both or
+      neither.
+    - ``groups``: G names of the bar groups.
+    - ``panels``: P names of the panels.
+    - ``joints``: n joint names (default the HuG-MP arm's).
+    - ``ax``: P matplotlib axes to draw into (default a new figure).
+    - ``title``: the figure's title.
+
+    **Returns:**
+
+    The matplotlib figure.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for non-numeric or misshaped arrays, only one of ``lo`` and
+      ``hi``, name lists of the wrong length, or the wrong number of axes.
     """
     import matplotlib.pyplot as plt
 

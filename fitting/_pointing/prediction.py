@@ -167,7 +167,16 @@ def predict_pointing(analysis: PointingAnalysis, KJ, q_rest, *, tau0=None, tau=N
     through the analysis' smoothing spline (its equivalent kernel) and cut at its speed
     threshold like the data; the model's values per subject × movement are the means over the
     trials. Its ``A_net`` is compared with the measured ones by a one-sample t-test per subject ×
-    movement (α = 0.05). Returns a :class:`PointingPrediction`.
+    movement (α = 0.05).
+
+    **Returns:**
+
+    A :class:`PointingPrediction`.
+
+    **Raises:**
+
+    ``TypeError`` for a non-analysis; ``ValueError`` naming the argument for ``KJ``/``q_rest`` of
+    the wrong shape, a ``KJ`` that is not SPD, or time constants that are not positive.
 
     **Compile time:** ≈ 3 s on first use, together with :func:`analyze_pointing`
     (benchmarks/compile_times.py).
