@@ -36,11 +36,26 @@ def _weights(w_true, n_min=2):
 
 @renamed_keywords(key="seed")
 def ik_fig1_data(seed=0, *, n_reps: int = 100, K: int = 500, w_true=FIG1_W, m: int = 3, sigma: float = 0.2):
-    """Random data of Fig 1: returns ``qdot`` (R, K, n), ``xdot`` (R, K, m), ``J`` (R, K, m, n).
+    """Random data of Khoramshahi et al. (2022), Figure 1: a redundant chain whose joint velocities
+    follow the weighted pseudo-inverse ``W* = diag(w_true)`` plus null-space motion.
 
-    ``seed`` an integer or a JAX PRNG key (an integer gives ``jax.random.PRNGKey(seed)``);
-    ``n_reps`` R repetitions; ``K`` samples each; ``w_true`` (n,) the
-    weights ``W* = diag(w_true)``; ``m < n`` task dimensions; ``sigma`` ≥ 0 the null-space scale.
+    **Arguments:**
+
+    - ``seed``: an integer or a JAX PRNG key (an integer gives ``jax.random.PRNGKey(seed)``).
+    - ``n_reps``: R repetitions.
+    - ``K``: samples per repetition.
+    - ``w_true``: (n,) the true weights.
+    - ``m``: task dimensions, ``m < n``.
+    - ``sigma``: the null-space scale, ≥ 0.
+
+    **Returns:**
+
+    ``(qdot, xdot, J)``: (R, K, n) joint velocities, (R, K, m) task velocities, (R, K, m, n) Jacobians.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for fewer than 2 or non-positive weights, non-positive sizes,
+      ``m >= n``, a negative ``sigma`` or a bad ``seed``.
     """
     w = _weights(w_true)
     n_reps, K, m = (check_positive_int(name, v) for name, v in (("n_reps", n_reps), ("K", K), ("m", m)))
@@ -68,11 +83,29 @@ def _fig1_data(key, w_true, sigma, *, n_reps, K, m):
 
 def ik_fig3_data(*, w_true=(1.0, 0.01), k_task: float = 1.0, k_null: float = 1.0, dt: float = 0.1,
                  duration: float = 6.0, q0=(0.5, 0.5)):
-    """Two prismatic joints, 1-D task (Fig 3). Returns ``qdot`` (K, 2), ``xdot`` (K, 1), ``J`` (K, 1, 2).
+    """Khoramshahi et al. (2022), Figure 3: two prismatic joints, a 1-D task.
 
-    ``q̇ = J#_{W*} k_task (x_g(t) − x) + N_{W*} (−k_null q1, 0)``, explicit Euler at ``dt`` [s]
-    for ``duration`` [s] from ``q0``; the goal switches 1 → 1.5 at t = 2 s → 0.5 at t = 3 s. (The
-    paper's null-space term is printed garbled; this is the reading "pull joint 1 to zero".)
+    ``q̇ = J#_{W*} k_task (x_g(t) − x) + N_{W*} (−k_null q1, 0)``, explicit Euler at ``dt`` for
+    ``duration`` from ``q0``; the goal switches 1 → 1.5 at t = 2 s → 0.5 at t = 3 s. (The paper's
+    null-space term is printed garbled; this is the reading "pull joint 1 to zero".)
+
+    **Arguments:**
+
+    - ``w_true``: the 2 true weights.
+    - ``k_task``: gain of the task term [1/s], ≥ 0.
+    - ``k_null``: gain of the null-space pull [1/s], ≥ 0.
+    - ``dt``: the Euler step [s].
+    - ``duration``: the run's length [s].
+    - ``q0``: the 2 start positions.
+
+    **Returns:**
+
+    ``(qdot, xdot, J)``: (K, 2), (K, 1), (K, 1, 2).
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for bad weights, negative gains, non-positive times or a bad
+      ``q0``.
     """
     w = _weights(w_true)
     if w.size != 2:
