@@ -89,6 +89,9 @@ def test_status_of_parts_whose_fits_did_not_all_converge(report):
     assert part_status({"status": "ok", "results": {"converged": [True, False, True]}}) == \
         ("ok, 2/3 converged", "partial")
     assert part_status({"status": "ok", "converged": [3, 3]}) == ("ok", "ok")
+    # a part whose every fit failed to converge is not "ok" (and the job exits 1 for it)
+    assert part_status({"status": "ok", "converged": [0, 24]}) == ("none of 24 fits converged", "failed")
+    assert part_status({"status": "ok", "results": {"converged": [False, False]}})[1] == "failed"
     assert part_status({"status": "failed"}) == ("failed", "failed")
     assert convergence({"converged": [[True, True], [False, True]]}) == (3, 4)
     assert convergence({"converged": [0.5, 1.0]}) is None and convergence({"converged": 3}) is None

@@ -55,12 +55,15 @@ def convergence(results) -> tuple[int, int] | None:
 
 
 def part_status(entry: dict) -> tuple[str, str]:
-    """The status of a part's ``results.json`` entry as shown, e.g. ``ok, 0/12 converged``, and
-    its class: "ok", "partial" (not every fit converged) or "failed"."""
+    """The status of a part's ``results.json`` entry as shown, e.g. ``ok, 3/12 converged``, and
+    its class: "ok", "partial" (not every fit converged) or "failed" (the part failed, or it ran
+    but none of its fits converged: ``none of 12 fits converged``)."""
     status = entry.get("status", "?")
     if status != "ok":
         return status, "failed"
     c = entry.get("converged") or convergence(entry.get("results"))
+    if c and c[0] == 0 and c[1] > 0:
+        return f"none of {c[1]} fits converged", "failed"
     if c and c[0] < c[1]:
         return f"ok, {c[0]}/{c[1]} converged", "partial"
     return "ok", "ok"
