@@ -267,8 +267,11 @@ def test_malformed_rows_and_headers_name_file_line_and_column(tmp_path):
     with pytest.raises(ValueError, match=rf"word\.mot: line {LINE1 + 3}, column 3 \('elevation_angle'\): not a "
                                          r"number: 'x17'"):
         pj.read_joint_angles(write(tmp_path, "word.mot", word))
-    with pytest.raises(ValueError, match=r"c\.csv: line 4, column 3 \('b'\): inf"):
+    # inf refused as inf (not by the radian range that happens to exclude it), in degrees too
+    with pytest.raises(ValueError, match=r"c\.csv: line 4, column 3 \('b'\): inf: 'inf'$"):
         pj.read_joint_angles(write(tmp_path, "c.csv", csv_text(["0,1,2", "0.01,1,2", "0.02,1,inf"])))
+    with pytest.raises(ValueError, match=r"d\.csv: line 3, column 2 \('a_deg'\): inf: '-inf'$"):
+        pj.read_joint_angles(write(tmp_path, "d.csv", csv_text(["0,1,2", "0.01,-inf,2"], "time,a_deg,b_deg")))
     with pytest.raises(ValueError, match=r"tn\.csv: line 3, column 1 \('time'\): not a number: ''"):
         pj.read_joint_angles(write(tmp_path, "tn.csv", csv_text(["0,1,2", ",1,2"])))
     with pytest.raises(ValueError, match=r"rows\.mot: line 3: nRows=5 but the file has 4 data rows"):
