@@ -26,10 +26,24 @@ from .weights import estimate_ik_weights
 
 
 def ik_decomposition(qdot, xdot, J, w):
-    """``q̇ = q̇_task + q̇_null`` with ``q̇_task = J#_W ẋ`` and ``q̇_null = q̇ − q̇_task`` (Eqs 7–12).
+    """Split joint velocities into task and null-space parts (Eqs 7–12):
+    ``q̇ = q̇_task + q̇_null`` with ``q̇_task = J#_W ẋ`` and ``q̇_null = q̇ − q̇_task``.
 
-    ``qdot`` (..., K, n), ``xdot`` (..., K, m), ``J`` (..., K, m, n), ``w`` (..., n) weights (one set
-    per item, shared by its K samples). Returns ``(qdot_task, qdot_null)``, each (..., K, n).
+    **Arguments:**
+
+    - ``qdot``: (..., K, n) joint velocities [rad/s].
+    - ``xdot``: (..., K, m) task velocities.
+    - ``J``: (..., K, m, n) Jacobians.
+    - ``w``: (..., n) weights (one set per item, shared by its K samples).
+
+    **Returns:**
+
+    ``(qdot_task, qdot_null)``, each (..., K, n) [rad/s].
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for data that do not share their axes (..., K) or weights
+      without the data's batch axes.
     """
     qdot = as_array("qdot", qdot, tail=(None, None))
     n = qdot.shape[-1]
@@ -55,8 +69,17 @@ def _decompose(qdot, xdot, J, w):
 
 
 def contribution_coefficients(w):
-    """Contribution coefficients ``β_i = w_i⁻¹ / Σ_k w_k⁻¹`` (..., n) (Eq 26) of positive weights
-    ``w`` (..., n); they sum to one. Differentiable."""
+    """Contribution coefficients ``β_i = w_i⁻¹ / Σ_k w_k⁻¹`` of IK weights (Eq 26); they sum to one.
+    Differentiable.
+
+    **Arguments:**
+
+    - ``w``: (..., n) positive weights.
+
+    **Returns:**
+
+    (..., n) the coefficients ``β``.
+    """
     w = as_array("w", w, tail=(None,))
     check_positive("w", w)
     return _contributions(to_jax(w))
@@ -71,10 +94,26 @@ def _contributions(w):
 def overspecified_joints(J, *, mask=None, rtol: float = 1e-6, fraction: float = 0.99):
     """Joints whose Jacobian column lies outside the span of the others (Experiment 1).
 
-    Joint j is over-specified when ``J`` without column j has rank < m at (at least ``fraction``
-    of the valid) samples: every solution of ``J q̇ = ẋ`` then has the same ``q̇_j``, so its IK
-    weight is unidentifiable; the paper sets it to 1 and normalises the others
-    (``estimate_ik_weights(..., fixed=...)``). ``J`` (..., K, m, n); returns bool (n,).
+    Joint j is over-specified when ``J`` without column j has rank < m at (at least ``fraction`` of
+    the valid) samples: every solution of ``J q̇ = ẋ`` then has the same ``q̇_j``, so its IK weight is
+    unidentifiable; the paper sets it to 1 and normalises the others
+    (``estimate_ik_weights(..., fixed=...)``).
+
+    **Arguments:**
+
+    - ``J``: (..., K, m, n) Jacobians.
+    - ``mask``: optional (..., K) bool valid samples.
+    - ``rtol``: relative singular-value threshold of the rank test, in (0, 1).
+    - ``fraction``: the share of valid samples at which the rank must drop, in (0, 1].
+
+    **Returns:**
+
+    (n,) bool, True for over-specified joints.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for a misshaped ``J`` or ``mask``, thresholds out of range, or
+      a mask that leaves no valid sample.
     """
     J = np.asarray(as_array("J", J, tail=(None, None)), dtype=float)
     if J.ndim < 2:
@@ -106,9 +145,15 @@ def overspecified_joints(J, *, mask=None, rtol: float = 1e-6, fraction: float = 
 
 @pytree_dataclass
 class BootstrapResult:
-    """``w`` (..., n) estimate on all trials with ``w_status`` (...,) its ``pj.Status``;
-    ``lo``/``hi`` (..., n) percentile interval; ``samples`` (B, ..., n) bootstrap replicates with
-    their ``status`` (B, ...) and ``converged`` (B, ...) (``status == SUCCESSFUL``)."""
+    """Bootstrap intervals of IK weights (the result of :func:`bootstrap_ik_weights`).
+
+    **Fields:**
+
+    - ``w``: (..., n) the estimate on all trials, with ``w_status`` (...,) its ``pj.Status``.
+    - ``lo``, ``hi``: (..., n) the percentile interval.
+    - ``samples``: (B, ..., n) bootstrap replicates, with their ``status`` (B, ...) and
+      ``converged`` (B, ...) (``status == SUCCESSFUL``).
+    """
 
     w: jax.Array
     lo: jax.Array
@@ -209,7 +254,11 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
 
 @pytree_dataclass
 class HotellingResult:
-    """``t2`` Hotelling's T², ``f`` its F statistic with ``df1``, ``df2`` degrees of freedom, ``p``."""
+    """Hotelling's T² test (the result of :func:`hotelling_t2`).
+
+    **Fields:** ``t2`` Hotelling's T²; ``f`` its F statistic with ``df1``, ``df2`` degrees of freedom;
+    ``p`` the p-value.
+    """
 
     t2: jax.Array
     f: jax.Array
@@ -219,13 +268,27 @@ class HotellingResult:
 
 
 def hotelling_t2(a, b, *, paired: bool = True) -> HotellingResult:
-    """Hotelling's T² test that two conditions have equal mean vectors.
+    """Hotelling's T² test that two conditions have equal mean vectors (Experiment 1).
 
-    ``a`` (N, p), ``b`` (N, p) for ``paired`` (the same N subjects in both conditions, as in
-    Experiment 1: ``T² = N d̄ᵀ S_d⁻¹ d̄``, ``F = (N − p) / (p (N − 1)) T² ~ F(p, N − p)``), or
-    ``a`` (N1, p), ``b`` (N2, p) independent samples (pooled covariance,
-    ``F = (N1 + N2 − p − 1) / (p (N1 + N2 − 2)) T² ~ F(p, N1 + N2 − p − 1)``). Drop variables that
-    are constant in both conditions (e.g. weights fixed at 1) before calling: S must be invertible.
+    Paired (the same N subjects in both conditions): ``T² = N d̄ᵀ S_d⁻¹ d̄``,
+    ``F = (N − p) / (p (N − 1)) T² ~ F(p, N − p)``. Independent samples: pooled covariance,
+    ``F = (N1 + N2 − p − 1) / (p (N1 + N2 − 2)) T² ~ F(p, N1 + N2 − p − 1)``. Drop variables that are
+    constant in both conditions (e.g. weights fixed at 1) before calling: S must be invertible.
+
+    **Arguments:**
+
+    - ``a``: (N, p) or (N1, p) the first condition's vectors (e.g. IK weights per subject).
+    - ``b``: (N, p) or (N2, p) the second condition's.
+    - ``paired``: paired (default) or independent samples.
+
+    **Returns:**
+
+    A :class:`HotellingResult`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-bool ``paired``; ``ValueError`` for misshaped or unequal (paired)
+      inputs, too few subjects for the number of variables, or a singular covariance.
     """
     a = to_jax(as_array("a", a, tail=(None,)), dtype=float)
     b = to_jax(as_array("b", b, tail=(a.shape[-1],)), dtype=float)
