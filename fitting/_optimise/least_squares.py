@@ -36,10 +36,21 @@ from pmpjax.internal import (
 
 @pytree_dataclass
 class LeastSquaresResult:
-    """``x`` (p,) solution; ``cost`` ½|r|²; ``residual`` (N,); ``jac`` (N, p) at ``x``;
-    ``grad_norm`` |Jᵀr|_∞; ``steps`` iterations; ``status`` int :class:`pmpjax.Status`
-    (``SUCCESSFUL``: a tolerance was met; ``NONFINITE``: the start's residual or Jacobian is not
-    finite; ``MAX_STEPS``); ``converged`` = ``status == SUCCESSFUL``."""
+    """The result of :func:`least_squares` (one problem; leading axes under ``vmap``).
+
+    **Fields:**
+
+    - ``x``: (p,) solution.
+    - ``cost``: ``½|r|²`` at ``x``.
+    - ``residual``: (N,) ``r`` at ``x``.
+    - ``jac``: (N, p) the Jacobian at ``x``.
+    - ``grad_norm``: ``|Jᵀr|_∞``.
+    - ``steps``: iterations.
+    - ``status``: int :class:`pmpjax.Status`: ``SUCCESSFUL`` (a tolerance was met), ``NONFINITE``
+      (the start's residual or Jacobian is not finite), ``MAX_STEPS``.
+
+    ``converged`` = ``status == SUCCESSFUL``.
+    """
 
     x: jax.Array
     cost: jax.Array
@@ -162,11 +173,23 @@ def _gauss_newton_gain(J, r):
 
 
 def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):
-    """Gauss–Newton covariance ``σ² (JᵀJ)⁺`` with ``σ² = 2 cost / (N − p)``.
+    """Gauss–Newton covariance ``σ² (JᵀJ)⁺`` of a least-squares result, ``σ² = 2 cost / (N − p)``.
 
-    Returns ``(cov (p, p), stderr (p,), singular_values (p,), right_singular_vectors (p, p))``;
-    directions with singular value below ``rcond·s_max`` are unidentifiable (infinite variance is
+    Directions with singular value below ``rcond·s_max`` are unidentifiable (infinite variance is
     replaced by the pseudo-inverse's zero there — check the singular values). Vmappable.
+
+    **Arguments:**
+
+    - ``result``: a :class:`LeastSquaresResult`.
+    - ``rcond``: the relative singular-value threshold, in [0, 1).
+
+    **Returns:**
+
+    ``(cov (p, p), stderr (p,), singular_values (p,), right_singular_vectors (p, p))``.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-result; ``ValueError`` for ``rcond`` outside [0, 1).
     """
     if not isinstance(result, LeastSquaresResult):
         raise TypeError(f"`result` must be a LeastSquaresResult, got {type(result).__name__}")
