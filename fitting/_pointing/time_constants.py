@@ -7,8 +7,12 @@ subject × movement — to the mean normalised paths, speed profiles and duratio
 optimiser loop) with Jacobians by forward-mode differentiation through ``pmpjax.simulate``.
 
 **Parameters.** ``log τ0`` and ``log τ`` (positive by construction). Per subject
-(``per_target=False``) one pair serves all 16 movements of the subject; per target one pair per
-subject × movement. The model movement starts at rest in the mean rest posture before the
+(``per_target=False``) one pair [s] serves all 16 movements of the subject; per target one pair per
+subject × movement. Where the time constants scale with each movement's duration (the paper's
+``τ = T_sj/5``; ``pmpjax.synthetic_pointing_experiment`` with ``target_spread``), the per-subject
+pair estimates the subject's typical values, the geometric mean over its movements, not any
+one movement's. The standard errors take ``KJ`` and ``q_rest`` as known: when they come from a
+Donders fit, its error moves τ further (tests/test_pointing.py, the main job's pointing part). The model movement starts at rest in the mean rest posture before the
 movement and goes to the target; it is analysed like the data (cut at the analysis threshold of
 its peak speed, half a data sample wider on each side as the sample-level cut of the data is on
 average, and resampled at the analysis' normalised times), after passing it through the
