@@ -49,9 +49,9 @@ from ._base.trig import sincos as sincos
 from ._base.validate import as_array as as_array
 from ._base.validate import as_prng_key as as_prng_key
 from ._base.validate import check_finite_masked as check_finite_masked
+from ._base.validate import check_joint_angles as check_joint_angles
 from ._base.validate import check_positive as check_positive
 from ._base.validate import check_positive_int as check_positive_int
-from ._base.validate import check_joint_angles as check_joint_angles
 from ._base.validate import check_prng_key as check_prng_key
 from ._base.validate import check_seconds as check_seconds
 from ._base.validate import check_spd as check_spd
@@ -69,10 +69,6 @@ from ._chains.mjcf import site_jacobians as site_jacobians
 
 # Data
 from ._data.hugmp import hugmp_directory as hugmp_directory
-
-# simulate's module, whose kernels benchmarks wrap within their own process (its compiled kernel
-# captured to time it alone, its adaptive integrator wrapped to count steps)
-from ._pmp import simulate as simulate_module  # noqa: F401
 
 # λ0-PMP kernels: one equilibrium (no checks, vmappable), the RK4 integrator, the one weighted
 # pseudo-inverse in its diagonal-weight SoA forms
@@ -104,3 +100,8 @@ from ._wrist.pointing import drop_trials as drop_trials
 from ._wrist.pointing import model_grid as model_grid
 from ._wrist.pointing import normalised_movements as normalised_movements
 from ._wrist.pointing import trial_problems as trial_problems
+
+# simulate's module, whose kernels benchmarks wrap within their own process (its compiled kernel
+# captured to time it alone, its adaptive integrator wrapped to count steps); looked up by name,
+# since the family's face binds ``simulate`` to the function
+simulate_module = __import__("importlib").import_module(f"{__package__}._pmp.simulate")

@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 
-from .._base.validate import as_array
+from .._base import as_array
 
 
 @dataclasses.dataclass(frozen=True)

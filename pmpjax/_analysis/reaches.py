@@ -31,8 +31,8 @@ import math
 
 import numpy as np
 
-from .._chains.kinematics import Chain
-from .._data.joint_angles import JointRecording
+from .._chains import Chain
+from .._data import JointRecording
 
 _MAD = 1.4826  # median absolute deviation -> standard deviation of a normal sample
 

@@ -7,9 +7,9 @@ the command line's text functions, and the simulation-config reader of the data 
 command extends.
 """
 
-from .._data.simulation_config import ConfigError as ConfigError
-from .._data.simulation_config import build_simulation as build_simulation
-from .._data.simulation_config import read_config as read_config
+from .._data import ConfigError as ConfigError
+from .._data import build_simulation as build_simulation
+from .._data import read_config as read_config
 from .parts import Part as Part
 from .parts import PartContext as PartContext
 from .text import example_help as example_help

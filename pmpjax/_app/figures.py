@@ -9,7 +9,7 @@ def _figure3(ctx: PartContext) -> dict:
     """Figure 3 of Tommasino & Campolo (2017): λ0-PMP center-out paths, speeds and curvature."""
     import numpy as np
 
-    from .._wrist.figure3 import figure3_data, plot_figure3
+    from .._wrist import figure3_data, plot_figure3
 
     data = figure3_data()
     ends = np.stack([data["targets"], np.zeros_like(data["targets"])], axis=1)
@@ -40,8 +40,7 @@ def _figure4(ctx: PartContext) -> dict:
     """Williamson (1996) Figure 4: two overlapping minimum-jerk set-point moves are summed."""
     import numpy as np
 
-    from .._springy_arm.plots import plot_summed_moves
-    from .._springy_arm.primitives import moves_from_targets, summed_moves
+    from .._springy_arm import moves_from_targets, plot_summed_moves, summed_moves
 
     # A move 0 → 1 (1 s) with a second move to 1.5 issued half-way.
     moves = moves_from_targets(np.zeros(1), np.array([[1.0], [1.5]]), np.array([0.0, 0.5]), 1.0)

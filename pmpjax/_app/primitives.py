@@ -56,11 +56,22 @@ def _primitives(ctx) -> dict:
     import jax
     import matplotlib.pyplot as plt
 
-    from .._chains.mjcf import MjcfChain
-    from .._springy_arm.arm import load_arm, rollout
-    from .._springy_arm.plots import plot_force_field, plot_reflex
-    from .._springy_arm.primitives import PRIMITIVE_NAMES, arm_equilibrium, blend, default_primitives, winner_take_all
-    from .._springy_arm.reflexes import reflex_network, run_reflexes, script_inputs, stack_inputs
+    from .._chains import MjcfChain
+    from .._springy_arm import (
+        PRIMITIVE_NAMES,
+        arm_equilibrium,
+        blend,
+        default_primitives,
+        load_arm,
+        plot_force_field,
+        plot_reflex,
+        reflex_network,
+        rollout,
+        run_reflexes,
+        script_inputs,
+        stack_inputs,
+        winner_take_all,
+    )
 
     arm = load_arm(contacts=False)  # touch is scripted; no probe contacts needed
     P = np.asarray(default_primitives())

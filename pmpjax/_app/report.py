@@ -111,7 +111,7 @@ def _cell(value: str, column: str) -> str:
     if value.strip().lower() in ("nan", "+nan", "-nan"):
         return MISSING
     if column.strip().lower() == "status" and _INT.fullmatch(value):
-        from .._base.status import Status
+        from .._base import Status
 
         try:
             return Status(int(value)).name

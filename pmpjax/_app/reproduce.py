@@ -9,8 +9,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from .._base.jsontext import json_text
-from .._base.validate import output_dir
+from .._base import json_text, output_dir
 from .cache import enable_compilation_cache
 from .display import Display
 from .parts import PartContext, as_part, available_parts, run_part

@@ -7,10 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._base.jsontext import write_json
-from .._base.validate import output_dir
-from .._data import simulation_config
-from .._data.simulation_config import ConfigError, build_simulation, read_config
+from .._base import output_dir, write_json
+from .._data import CONFIG_HELP, ConfigError, build_simulation, read_config
 from .text import example_help, plain, plural
 
 
@@ -59,7 +57,7 @@ def run_simulation_config(path, out) -> dict:
 
 def add_simulate_command(sub) -> None:
     p = sub.add_parser("simulate", help="simulate movements described in a TOML/JSON file",
-                       description=plain(simulation_config.__doc__), epilog=example_help("simulate_figure3.toml"),
+                       description=plain(CONFIG_HELP), epilog=example_help("simulate_figure3.toml"),
                        formatter_class=__import__("argparse").RawDescriptionHelpFormatter)
     p.add_argument("config", help="TOML or JSON configuration file")
     p.add_argument("--out", default="out_simulate", help="output folder (default out_simulate)")
@@ -67,7 +65,7 @@ def add_simulate_command(sub) -> None:
     def run(args) -> int:
         import jax
 
-        from .._base.status import Status
+        from .._base import Status
 
         jax.config.update("jax_enable_x64", True)
         s = run_simulation_config(args.config, args.out)

@@ -11,7 +11,7 @@ import time
 import traceback
 from pathlib import Path
 
-from .._base.jsontext import json_safe
+from .._base import json_safe
 from .cache import enable_compilation_cache
 from .parts import PartContext, as_part, portable, run_part
 

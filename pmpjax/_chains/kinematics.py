@@ -15,13 +15,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import on_host
-from .._base.compile import fast_compile_jit
-from .._base.linalg import det_lists, elements, from_soa, to_soa
-from .._base.pytree import pytree_dataclass, register_pytree_class, static_field
-from .._base.rotations import rotation_matrix
-from .._base.trig import sincos
-from .._base.validate import MAX_JOINT_ANGLE, as_array, check_joint_angles, check_positive, is_concrete, to_jax
+from .._base import (
+    MAX_JOINT_ANGLE,
+    as_array,
+    check_joint_angles,
+    check_positive,
+    det_lists,
+    elements,
+    fast_compile_jit,
+    from_soa,
+    is_concrete,
+    on_host,
+    pytree_dataclass,
+    register_pytree_class,
+    rotation_matrix,
+    sincos,
+    static_field,
+    to_jax,
+    to_soa,
+)
 
 
 class Chain:

@@ -17,11 +17,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import row_chunks
-from .._base.compile import fast_compile_jit
-from .._base.mujoco import import_mjx, import_mujoco, is_mj_model, load_mj_model
-from .._base.pytree import pytree_dataclass, static_field
-from .._base.validate import is_concrete, to_jax
+from .._base import (
+    fast_compile_jit,
+    import_mjx,
+    import_mujoco,
+    is_concrete,
+    is_mj_model,
+    load_mj_model,
+    pytree_dataclass,
+    row_chunks,
+    static_field,
+    to_jax,
+)
 from .kinematics import Chain
 from .serial import site_fk_jac_soa, site_path
 

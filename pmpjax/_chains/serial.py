@@ -19,8 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._base.rotations import add_const, matmul_rows, mul_const
-from .._base.trig import sincos
+from .._base import add_const, matmul_rows, mul_const, sincos
 
 _SLIDE, _HINGE = 2, 3
 _TINY = 1e-14  # constants smaller than this are structural zeros

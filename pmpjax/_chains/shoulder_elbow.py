@@ -14,10 +14,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.pytree import pytree_dataclass, static_field
-from .._base.rotations import add_const, matmul_rows, mul_const, rotation_rows
-from .._base.trig import sincos
-from .._base.validate import as_array, check_positive
+from .._base import (
+    add_const,
+    as_array,
+    check_positive,
+    matmul_rows,
+    mul_const,
+    pytree_dataclass,
+    rotation_rows,
+    sincos,
+    static_field,
+)
 from .kinematics import Chain
 
 

@@ -20,9 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._base.batching import bucket, pad_rows
-from .._base.compile import fast_compile_jit
-from .._base.validate import as_path, check_positive_int
+from .._base import as_path, bucket, check_positive_int, fast_compile_jit, pad_rows
 from .matlab import mat_version
 
 HUGMP_TASKS = {

@@ -79,8 +79,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._base.validate import as_path, check_positive, input_file, read_text_file
-from .._chains.kinematics import Chain
+from .._base import as_path, check_positive, input_file, read_text_file
+from .._chains import Chain
 
 #: Extensions read (and written, but ``.mat``) by this module.
 FORMATS = (".mot", ".sto", ".csv", ".mat")

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._base.validate import as_path, input_file
+from .._base import as_path, input_file
 
 _MAT73_HEADER = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: pmpjax HDF5 schema 1.00 ."
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}\Z")

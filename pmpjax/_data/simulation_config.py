@@ -42,11 +42,13 @@ import warnings
 
 import numpy as np
 
-from .._base.validate import check_seconds, check_spd, input_file, read_text_file
-from .._chains.kinematics import PlanarArm, Wrist
-from .._pmp.models import PMP1, PMP2, Lambda0PMP, damping_from_stiffness
-from .._pmp.planners import ArimotoPlanner, ConstantPlanner, MinimumJerkPlanner
-from .._wrist.center_out import center_out_targets
+from .._base import check_seconds, check_spd, input_file, read_text_file
+from .._chains import PlanarArm, Wrist
+from .._pmp import PMP1, PMP2, ArimotoPlanner, ConstantPlanner, Lambda0PMP, MinimumJerkPlanner, damping_from_stiffness
+from .._wrist import center_out_targets
+
+#: The format of a simulation file, as ``pmpjax simulate --help`` shows it (this module's docstring).
+CONFIG_HELP = __doc__
 
 
 class ConfigError(ValueError):

@@ -32,23 +32,28 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, row_chunks, unflatten_batch
-from .._base.compile import fast_compile_jit
-from .._base.deprecation import renamed_keywords
-from .._base.linalg import spd_solve
-from .._base.newton import newton_solve
-from .._base.pytree import pytree_dataclass
-from .._base.status import Status
-from .._base.validate import (
+from .._base import (
+    Status,
     as_array,
+    broadcast_batch,
+    bucket,
     check_positive,
     check_positive_int,
     check_spd,
+    fast_compile_jit,
+    flatten_batch,
     is_concrete,
+    newton_solve,
+    pad_rows,
+    pytree_dataclass,
+    renamed_keywords,
+    row_chunks,
+    spd_solve,
     to_jax,
+    unflatten_batch,
     warn_without_x64,
 )
-from .._chains.kinematics import Chain
+from .._chains import Chain
 
 _STEP_CAP = 0.5  # rad, infinity norm of a Newton step in q
 

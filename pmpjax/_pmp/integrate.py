@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .._base.linalg import lu_factor_lists, lu_solve_lists
+from .._base import lu_factor_lists, lu_solve_lists
 
 
 def rk4_step(f: Callable, t, y, h, args, *, observed: bool = False, stage_loop: bool = False):

@@ -17,11 +17,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch
-from .._base.linalg import mv, spd_inv, to_soa
-from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_seconds, check_spd, is_concrete, to_jax
-from .._chains.kinematics import Chain
+from .._base import (
+    as_array,
+    broadcast_batch,
+    check_positive,
+    check_seconds,
+    check_spd,
+    is_concrete,
+    mv,
+    pytree_dataclass,
+    spd_inv,
+    to_jax,
+    to_soa,
+)
+from .._chains import Chain
 from .redundancy import admittance_terms_soa, lambda0_soa
 
 

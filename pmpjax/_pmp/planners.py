@@ -11,10 +11,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.linalg import spd_solve
-from .._base.profiles import minimum_jerk_hazard
-from .._base.pytree import pytree_dataclass, replace, static_field
-from .._base.validate import as_array, check_positive, check_seconds
+from .._base import (
+    as_array,
+    check_positive,
+    check_seconds,
+    minimum_jerk_hazard,
+    pytree_dataclass,
+    replace,
+    spd_solve,
+    static_field,
+)
 
 
 def _scale(gain, e):

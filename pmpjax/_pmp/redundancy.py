@@ -14,9 +14,21 @@ from functools import partial
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.compile import fast_compile_jit
-from .._base.linalg import elements, from_soa, mm, mv, spd_inv, spd_solve, spd_solve_lists, to_soa
-from .._base.validate import as_array, check_positive, check_spd, to_jax
+from .._base import (
+    as_array,
+    check_positive,
+    check_spd,
+    elements,
+    fast_compile_jit,
+    from_soa,
+    mm,
+    mv,
+    spd_inv,
+    spd_solve,
+    spd_solve_lists,
+    to_jax,
+    to_soa,
+)
 
 
 def admittance_terms_soa(J, A):

@@ -15,21 +15,26 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .._base.batching import flatten_batch, on_host
-from .._base.compile import fast_compile_applies, fast_compile_jit, top_level
-from .._base.linalg import mv, to_soa
-from .._base.pytree import pytree_dataclass, replace
-from .._base.status import Status
-from .._base.validate import (
+from .._base import (
+    Status,
     as_array,
     check_positive_int,
     check_seconds,
+    fast_compile_applies,
+    fast_compile_jit,
+    flatten_batch,
     is_concrete,
+    mv,
+    on_host,
     positive_float,
+    pytree_dataclass,
+    replace,
     to_jax,
+    to_soa,
+    top_level,
     warn_without_x64,
 )
-from .._chains.kinematics import manipulability_soa
+from .._chains import manipulability_soa
 from .integrate import SOLVERS, integrate_adaptive, integrate_observed
 from .models import _PMP
 from .planners import Planner

@@ -39,12 +39,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import flatten_batch, on_host
-from .._base.compile import fast_compile_jit
-from .._base.mujoco import import_mjx, import_mujoco, load_spec
-from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive_int, is_concrete, to_jax
-from .._chains.mjcf import gravity_from_kinematics, kinematics
+from .._base import (
+    as_array,
+    check_positive_int,
+    fast_compile_jit,
+    flatten_batch,
+    import_mjx,
+    import_mujoco,
+    is_concrete,
+    load_spec,
+    on_host,
+    pytree_dataclass,
+    to_jax,
+)
+from .._chains import gravity_from_kinematics, kinematics
 
 JOINTS = ("sh_flex", "sh_abd", "sh_rot", "el_flex", "wr_flex", "wr_dev")
 DEFAULT_K = (40.0, 40.0, 20.0, 20.0, 5.0, 5.0)  # Nm/rad: human-like, so gravity sags the arm

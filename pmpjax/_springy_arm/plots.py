@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._base.validate import as_array, check_positive, check_positive_int
-from .._chains.mjcf import MjcfChain
+from .._base import as_array, check_positive, check_positive_int
+from .._chains import MjcfChain
 from .arm import JOINTS, ArmTrajectory
 from .primitives import Moves, force_field, summed_moves
 

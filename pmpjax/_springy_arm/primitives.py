@@ -18,15 +18,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import broadcast_batch, bucket, flatten_batch, pad_rows, unflatten_batch
-from .._base.compile import fast_compile_jit
-from .._base.deprecation import renamed_keywords
-from .._base.profiles import minimum_jerk
-from .._base.pytree import pytree_dataclass
-from .._base.status import Status
-from .._base.validate import as_array, check_positive, check_positive_int, is_concrete, to_jax
-from .._chains.mjcf import MjcfChain, gravity_gradients, gravity_terms, site_position
-from .._pmp.redundancy import weighted_pinv
+from .._base import (
+    Status,
+    as_array,
+    broadcast_batch,
+    bucket,
+    check_positive,
+    check_positive_int,
+    fast_compile_jit,
+    flatten_batch,
+    is_concrete,
+    minimum_jerk,
+    pad_rows,
+    pytree_dataclass,
+    renamed_keywords,
+    to_jax,
+    unflatten_batch,
+)
+from .._chains import MjcfChain, gravity_gradients, gravity_terms, site_position
+from .._pmp import weighted_pinv
 from .arm import CogArm, check_arm
 
 # ----------------------------------------------------------------------------------------------
@@ -163,7 +173,7 @@ def _equilibrium_one(mx, site_id, q_set, K, max_steps, tol, diagnostics=True):
     # The shared Newton solver (pmpjax._base.newton): residual K (θ − θ_set) + ∇V(θ), Newton
     # matrix K + ∇²V from one MJX kinematics pass, 0.5 rad cap, max_steps steps; implicit gradients
     # in (θ_set, K), the model's tangents ignored (consts).
-    from .._base.newton import newton_solve
+    from .._base import newton_solve
 
     def residual(q, params, mx):
         qs, Kp = params

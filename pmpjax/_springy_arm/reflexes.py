@@ -34,9 +34,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.profiles import minimum_jerk
-from .._base.pytree import pytree_dataclass, static_field
-from .._base.validate import as_array, check_positive, check_positive_int, is_concrete, to_jax
+from .._base import (
+    as_array,
+    check_positive,
+    check_positive_int,
+    is_concrete,
+    minimum_jerk,
+    pytree_dataclass,
+    static_field,
+    to_jax,
+)
 from .arm import ArmTrajectory, CogArm, check_arm, run_controller
 
 REACH, GRASP, WITHDRAW, LEAD = 0, 1, 2, 3

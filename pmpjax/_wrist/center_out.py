@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._base.validate import check_positive_int
+from .._base import check_positive_int
 
 #: Peripheral target names in compass order; E = +x1 (right), N = +x2 (up).
 DIRECTIONS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")

@@ -5,8 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.compile import fast_compile_jit
-from .._base.validate import as_array, to_jax
+from .._base import as_array, fast_compile_jit, to_jax
 
 
 def curvature_areas(path, start, end):

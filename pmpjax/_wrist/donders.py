@@ -18,12 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import on_host
-from .._base.compile import fast_compile_jit
-from .._base.pytree import pytree_dataclass
-from .._base.validate import as_array, check_positive, check_positive_int, to_jax
-from .._chains.kinematics import Wrist
-from .._pmp.equilibria import equilibrium_posture
+from .._base import as_array, check_positive, check_positive_int, fast_compile_jit, on_host, pytree_dataclass, to_jax
+from .._chains import Wrist
+from .._pmp import equilibrium_posture
 from .orientation import rotvec_from_joint_angles
 
 SCREEN_HALF_ANGLE_DEG = 20.0  # the pointing area of the Donders experiments: ±20°

@@ -35,7 +35,7 @@ import os
 
 import numpy as np
 
-from .._base.validate import (
+from .._base import (
     as_array,
     check_finite_masked,
     check_positive,
@@ -46,8 +46,8 @@ from .._base.validate import (
     open_npz,
     read_text_file,
 )
-from .._chains.kinematics import Wrist
-from .._pmp.equilibria import equilibrium_posture
+from .._chains import Wrist
+from .._pmp import equilibrium_posture
 from .donders import SCREEN_HALF_ANGLE_DEG
 from .orientation import (
     joint_angles_from_quat,

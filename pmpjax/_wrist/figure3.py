@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._chains.kinematics import Wrist
-from .._pmp.models import Lambda0PMP, damping_from_stiffness
-from .._pmp.planners import ArimotoPlanner
-from .._pmp.simulate import SaveAt, simulate_sequence
+from .._chains import Wrist
+from .._pmp import ArimotoPlanner, Lambda0PMP, SaveAt, damping_from_stiffness, simulate_sequence
 from .center_out import DIRECTIONS, TARGET_RADIUS, center_out_targets
 from .curvature import curvature_measures
 

@@ -25,10 +25,8 @@ from functools import partial
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import eager_rows
-from .._base.compile import fast_compile_jit
-from .._base.validate import as_array, is_concrete, to_jax
-from .._chains.kinematics import Wrist
+from .._base import as_array, eager_rows, fast_compile_jit, is_concrete, to_jax
+from .._chains import Wrist
 
 _WRIST = Wrist()
 

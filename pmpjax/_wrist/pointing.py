@@ -44,15 +44,20 @@ from functools import partial
 import jax.numpy as jnp
 import numpy as np
 
-from .._base.batching import bucket, head_rows, pad_rows
-from .._base.compile import fast_compile_jit
-from .._base.pytree import replace
-from .._base.validate import check_positive_int, input_file, is_concrete, open_npz, read_text_file
-from .._chains.kinematics import Wrist
-from .._pmp.equilibria import equilibrium_posture
-from .._pmp.models import Lambda0PMP
-from .._pmp.planners import ArimotoPlanner
-from .._pmp.simulate import simulate
+from .._base import (
+    bucket,
+    check_positive_int,
+    fast_compile_jit,
+    head_rows,
+    input_file,
+    is_concrete,
+    open_npz,
+    pad_rows,
+    read_text_file,
+    replace,
+)
+from .._chains import Wrist
+from .._pmp import ArimotoPlanner, Lambda0PMP, equilibrium_posture, simulate
 from .center_out import DIRECTIONS, center_out_targets, center_out_trials, target_radius
 from .donders_recordings import DondersRecording, synthetic_recordings, write_recordings
 from .orientation import matrix_from_rotvec, quat_from_matrix, wrist_rotation
