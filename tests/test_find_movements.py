@@ -162,6 +162,41 @@ def test_a_reach_cut_short_by_the_next_ends_at_the_speed_minimum_between_them(th
     assert abs(found.t_start[0] - true[0]["t_rest"]) <= 0.12 and abs(found.t_end[2] - true[2]["t_rest_off"]) <= 0.12
 
 
+#: Three postures in a line in joint space: two reaches in one direction whose speeds add up.
+LINE = np.deg2rad([20.0, 60.0, 30.0]) + np.outer([0.0, 1.0, 2.0], np.deg2rad([35.0, -25.0, -15.0]))
+
+
+def _dip_of(t1, D=0.8):
+    """The closed-form hand speed's dip between the two peaks of reaches (1.0, D) and (t1, D) along
+    LINE, as a fraction of the lower peak (its prominence), and the peaks' times."""
+    tf = np.arange(0.5, t1 + D + 0.5, 1e-3)
+    _, speed = hand(*joint_path(tf, ((1.0, D), (t1, D)), LINE))
+    inner = np.flatnonzero((speed[1:-1] > speed[:-2]) & (speed[1:-1] >= speed[2:])) + 1
+    if len(inner) < 2:
+        return 0.0, tf[inner]
+    a, b = inner[0], inner[-1]
+    low = min(speed[a], speed[b])
+    return (low - speed[a:b + 1].min()) / low, tf[[a, b]]
+
+
+@pytest.mark.parametrize(("dip", "reaches"), [(0.1, 1), (0.3, 2)])
+def test_two_reaches_are_separate_when_the_speed_between_them_dips_by_a_fifth(dip, reaches):
+    """The documented default ``min_dip = 0.2`` by its behaviour: two reaches in one direction
+    (equal peaks, about 0.5 m/s), started so that the closed-form speed between the peaks dips
+    by 10 % of the lower peak, are one reach; by 30 %, two, each at its own peak."""
+    starts = np.arange(1.3, 1.8, 0.005)
+    t1 = starts[np.argmin([abs(_dip_of(t1)[0] - dip) for t1 in starts])]
+    depth, t_peaks = _dip_of(t1)
+    assert abs(depth - dip) < 0.02
+    t = np.arange(0.0, t1 + 2.5, 1 / FS)
+    found = pj.find_movements(recording(t, ((1.0, 0.8), (t1, 0.8)), LINE, seed=1), ARM)
+    assert len(found) == reaches and not found.skipped
+    if reaches == 2:
+        np.testing.assert_allclose(found.t_peak, t_peaks, atol=0.1)  # (peaks 0.5 s apart; smoothing moves them)
+    else:
+        assert found.t_onset[0] < t_peaks[0] and found.t_offset[0] > t_peaks[1]
+
+
 def test_a_twitch_below_min_peak_speed_is_skipped_with_its_reason():
     # A 12° flick of the wrist joint alone (0.3 s) in the pause between reaches 1 and 2.
     postures = np.concatenate([POSTURES[:2], POSTURES[1:2] + np.deg2rad([0.0, 0.0, 12.0]), POSTURES[2:]])
