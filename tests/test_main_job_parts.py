@@ -5,6 +5,7 @@ each runs, writes its artefacts, and its numbers agree with something independen
 
 import numpy as np
 import pytest
+from _layout import checking_part_figures
 from scipy import stats
 
 from pmpjax._app import cli
@@ -13,9 +14,21 @@ from pmpjax._app import cli
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("main_job")
-    res = cli.reproduce(out, quick=True, only=["ik_figures", "ik_synthetic", "ik_hugmp", "sweeps"],
-                         progress=False, cache=False)
+    with checking_part_figures() as layout:
+        res = cli.reproduce(out, quick=True, only=["ik_figures", "ik_synthetic", "ik_hugmp", "sweeps"],
+                             progress=False, cache=False)
+    res["layout"] = layout
     return out, res
+
+
+def test_figures_keep_their_titles_and_legends_inside_and_off_the_data(run):
+    """The parts' figures (IK Figures 1–3, the two IK weight figures, the curvature map): every
+    title and legend inside the figure, no legend over bars, lines or panels."""
+    _, res = run
+    layout = res["layout"]
+    assert {"ik_figures_1_3.png", "ik_synthetic_conditions.png", "ik_weights_hugmp.png", "curvature_map.png"} \
+        <= set(layout)
+    assert {name: problems for name, problems in layout.items() if problems} == {}
 
 
 @pytest.mark.parametrize("part", ["ik_figures", "ik_synthetic", "ik_hugmp", "sweeps"])

@@ -199,8 +199,8 @@ def _ik_figures(ctx) -> dict:
     ax[2].bar(np.arange(4) - 0.15, w3[:, 0], 0.3, label="w1")
     ax[2].bar(np.arange(4) + 0.15, w3[:, 1], 0.3, label="w2 (truth 0.01)")
     ax[2].set_xticks(range(4), [f"γ={g}" for g in g3])
-    ax[2].set(title="Fig 3: two prismatic joints, w* = (1, 0.01)")
-    ax[2].legend()
+    ax[2].set(title="Fig 3: two prismatic joints, w* = (1, 0.01)", ylim=(0, 1.45))
+    ax[2].legend(loc="upper center", ncol=2)  # (above the bars, which reach 1)
     fig.tight_layout()
     ctx.figure(fig, "ik_figures_1_3.png",
                "Algorithm 1 on the paper's synthetic examples: recovered weights ± sd over repetitions "
