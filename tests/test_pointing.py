@@ -8,6 +8,7 @@ import pytest
 import scipy.integrate
 import scipy.optimize
 import scipy.stats
+from _layout import layout_problems
 from _reference import arimoto, pmp_qdot, rx, ry, rz, shoelace, wrist_fk
 from scipy.spatial.transform import Rotation
 
@@ -488,8 +489,10 @@ def test_predictions_and_captured_counts_equal_a_direct_scipy_computation(analys
     lines = fig.axes[0].get_lines()
     styles = [ln.get_linestyle() for ln in lines]
     assert styles.count("--") == 16 and styles.count("-") >= 15
+    assert layout_problems(fig) == []
     for plot in (fitting.plot_pointing_curvature, fitting.plot_pointing_joints, fitting.plot_pointing_speed):
-        assert plot(analysis, pr, subject=1).axes
+        other = plot(analysis, pr, subject=1)
+        assert other.axes and layout_problems(other) == [], plot.__name__  # titles and legends inside, off the data
     plt.close("all")
 
 
