@@ -6,19 +6,31 @@ import csv
 import mujoco
 import numpy as np
 import pytest
+from _layout import checking_part_figures
 
 import pmpjax as pj
 from pmpjax._app import cli
 from pmpjax._springy_arm.primitives import PRIMITIVES
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: Layout problems of each figure the part records (filled by the ``run`` fixture).
+LAYOUT: dict[str, list[str]] = {}
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("primitives")
-    res = cli.reproduce(out, quick=True, only=["primitives"], progress=False, cache=False)
+    with checking_part_figures() as layout:
+        res = cli.reproduce(out, quick=True, only=["primitives"], progress=False, cache=False)
+    LAYOUT.update(layout)
     return out, res["primitives"]
+
+
+def test_figures_keep_their_titles_and_legends_inside_and_off_the_data(run):
+    """Blends, force field (its legend used to hide arrows), reflex traces: every title and
+    legend inside the figure, none over what the figure draws."""
+    assert "primitives_force_field.png" in LAYOUT and len(LAYOUT) >= 4
+    assert {name: problems for name, problems in LAYOUT.items() if problems} == {}
 
 
 def rows(path):
