@@ -32,14 +32,17 @@ from ._reaching.motions import _motions as reaching_motions
 from ._reaching.predict import BASELINES as REACHING_BASELINES
 
 # Sweeps: the local engine (one compiled kernel over the local devices), the store's atomic chunk
-# write, the example kernel of the curvature map
+# write, the example kernels (a curvature-map row; a Donders power-analysis row: data generation
+# and the NIO fit)
 from ._sweep.engines import _LocalEngine as LocalEngine
 from ._sweep.examples import curvature_row as curvature_row
+from ._sweep.examples import donders_power_row as donders_power_row
 from ._sweep.store import _atomic_write as atomic_write
 
 __all__ = [
-    "FIT_DT", "FIT_SPAN", "REACHING_BASELINES", "REACHING_DAMPINGS", "REACHING_MODELS", "REACHING_SAMPLES",
-    "REACHING_TIME_CONSTANTS", "LocalEngine", "ReachingConfig", "atomic_write", "curvature_row", "fit_nio_batch",
-    "fit_reaching_motions", "movement_fit_module", "nio_residual", "nio_starts", "reaching_motions",
+    "FIT_DT", "FIT_SPAN", "REACHING_BASELINES", "REACHING_DAMPINGS", "REACHING_MODELS",
+    "REACHING_SAMPLES", "REACHING_TIME_CONSTANTS", "atomic_write", "curvature_row",
+    "donders_power_row", "fit_nio_batch", "fit_reaching_motions", "LocalEngine",
+    "movement_fit_module", "nio_residual", "nio_starts", "reaching_motions", "ReachingConfig",
     "silverman_weights", "time_constant_item_data",
 ]
