@@ -188,16 +188,34 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
                          level: float = 0.95, **options) -> BootstrapResult:
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
-    ``qdot`` (..., T, S, n), ``xdot`` (..., T, S, m), ``J`` (..., T, S, m, n), ``mask`` (..., T, S)
-    (a trial with no valid sample is never drawn; each replicate draws as many trials as the item
-    has valid ones); ``key`` a JAX PRNG key (default ``PRNGKey(0)``) or one key per item (shape
-    (...,) + key shape). An item's replicates depend only on its own data and key: with one key
-    per item, a batch gives what its items give one by one with their keys; with one key for a
-    batch, item i (flat order) draws from the i-th stream spawned from the key
-    (``numpy.random.SeedSequence``). The estimate on the data and all ``n_boot`` replicates of
-    every item run in one vectorised :func:`estimate_ik_weights` call (``options`` are passed on;
-    items with unusable data are flagged, giving NaN, not raising). ``lo``/``hi`` are the
-    ``(1 ± level)/2`` percentiles of the replicates.
+    An item's replicates depend only on its own data and key: with one key per item, a batch gives
+    what its items give one by one with their keys; with one key for a batch, item i (flat order)
+    draws from the i-th stream spawned from the key (``numpy.random.SeedSequence``). The estimate on
+    the data and all ``n_boot`` replicates of every item run in one vectorised
+    :func:`estimate_ik_weights` call (items with unusable data are flagged, giving NaN, not raising).
+
+    **Arguments:**
+
+    - ``qdot``: (..., T, S, n) joint velocities of T trials of S samples [rad/s].
+    - ``xdot``: (..., T, S, m) task velocities.
+    - ``J``: (..., T, S, m, n) Jacobians.
+    - ``mask``: optional (..., T, S) bool valid samples (a trial with no valid sample is never drawn;
+      each replicate draws as many trials as the item has valid ones).
+    - ``n_boot``: replicates per item (≥ 2).
+    - ``key``: a JAX PRNG key (default ``PRNGKey(0)``) or one key per item (shape (...,) + key shape).
+    - ``level``: the interval's coverage, in (0, 1): ``lo``/``hi`` are the ``(1 ± level)/2``
+      percentiles of the replicates.
+    - ``options``: passed on to :func:`estimate_ik_weights` (``gamma``, ``tol``, ``fixed``, ...).
+
+    **Returns:**
+
+    A :class:`BootstrapResult`.
+
+    **Raises:**
+
+    - ``TypeError`` for keys that are not JAX PRNG keys or an ``on_invalid`` option; ``ValueError``
+      naming the argument for data that do not share their axes, a misshaped ``mask``, ``level``
+      outside (0, 1) or ``n_boot < 2``.
     """
     qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
     xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
