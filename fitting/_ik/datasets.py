@@ -312,13 +312,33 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     """IK weights of HuG-MP subjects per task (or per task × motion) with bootstrap intervals.
 
     Loads each subject (``pmpjax.load_hugmp``; irregular cells are skipped and reported), derives
-    ``q̇``, ``ẋ``, ``J`` from smoothed joint angles on the 4-DoF chain (each motion time-normalised
-    to ``samples`` points), fixes the over-specified elbow at 1 (Experiment-1 convention) and runs
-    one vectorised bootstrap over motions (trials). Returns ``dict(w, lo, hi (N, 6[, M], 4),
-    status (N, 6[, M]) the ``pj.Status`` of the point estimate, converged (N, 6[, M]) the fraction of
-    bootstrap replicates that converged (``SUCCESSFUL``), stalled (N, 6[, M]) the fraction that
-    ended ``STALLED``, subjects, fixed, skipped {subject: [...]}, notes, failed {subject: message})``;
-    a subject that cannot be loaded is reported in ``failed`` and left out.
+    ``q̇``, ``ẋ``, ``J`` from smoothed joint angles on the 4-DoF chain (each motion time-normalised to
+    ``samples`` points), fixes the over-specified elbow at 1 (Experiment-1 convention) and runs one
+    vectorised bootstrap over motions (trials), :func:`bootstrap_ik_weights`.
+
+    **Arguments:**
+
+    - ``subjects``: HuG-MP subject numbers or names.
+    - ``directory``: folder of the ``S0i_trajs.mat`` files (as ``pmpjax.load_hugmp``).
+    - ``chain``: the 4-DoF chain (default ``pj.ShoulderElbowArm()``).
+    - ``gamma``: the null-space ratio in [0, 1].
+    - ``samples``: points per motion after time normalisation (≥ 2).
+    - ``n_boot``, ``key``, ``level``: as :func:`bootstrap_ik_weights`.
+    - ``per_motion``: weights per task × motion instead of per task.
+    - ``options``: passed on to :func:`estimate_ik_weights`.
+
+    **Returns:**
+
+    ``dict(w, lo, hi (N, 6[, M], 4), status (N, 6[, M]) the pj.Status of the point estimate,
+    converged (N, 6[, M]) the fraction of bootstrap replicates that converged (SUCCESSFUL), stalled
+    (N, 6[, M]) the fraction that ended STALLED, subjects, fixed, skipped {subject: [...]}, notes,
+    failed {subject: message})``; a subject that cannot be loaded is reported in ``failed`` and left
+    out.
+
+    **Raises:**
+
+    - ``ValueError`` naming the argument for no subjects, ``gamma`` outside [0, 1] or fewer than 2
+      ``samples``, and when no subject can be loaded.
     """
     from .analysis import bootstrap_ik_weights, overspecified_joints
 
