@@ -77,7 +77,7 @@ def least_squares(
     stol: float | None = None,
     damping: float = 1e-3,
 ) -> LeastSquaresResult:
-    """Minimise ``½ |residual(x, args)|²`` over ``x`` (p,) by Levenberg–Marquardt.
+    """Minimise ``½ |residual(x, args)|²`` over ``x`` by Levenberg–Marquardt (jit-able, vmappable).
 
     Marquardt scaling (damping on ``diag(JᵀJ)``) and Nielsen's damping update. Converged when
     ``|Jᵀr|_∞ <= gtol``, or an accepted step changes the cost by ``<= ftol·cost``, or the step is
@@ -86,6 +86,26 @@ def least_squares(
     ``√(2 stol)`` standard errors of the optimum (``stol = 1e-4``: 0.014), which is what a fit to
     noisy data can mean by converged, also where the residual is only piecewise smooth (thresholds,
     interpolation) and Levenberg–Marquardt would crawl. Non-finite trial residuals are rejected steps.
+
+    **Arguments:**
+
+    - ``residual``: a JAX function ``residual(x, args)`` -> (N,) residual vector.
+    - ``x0``: (p,) the start.
+    - ``args``: a pytree passed to ``residual`` (data; vmap over it to fit many problems at once).
+    - ``max_steps``: iterations at most (a traced ``0`` returns the residual and Jacobian at ``x0``).
+    - ``gtol``, ``ftol``, ``xtol``: the gradient, cost and step tolerances above (≥ 0).
+    - ``stol``: the statistical tolerance above (None: off).
+    - ``damping``: the initial Levenberg–Marquardt damping.
+
+    **Returns:**
+
+    A :class:`LeastSquaresResult`.
+
+    **Raises:**
+
+    - ``TypeError`` for a non-callable ``residual``; ``ValueError`` naming the
+      argument for an ``x0`` that is not 1-D, negative or non-finite tolerances, or a residual that is
+      not a 1-D vector.
     """
     if not callable(residual):
         raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
