@@ -1,16 +1,24 @@
-"""The documentation site: it builds in strict mode, and its API reference lists every public name.
+"""The documentation site: it builds in strict mode, its API reference lists every public name, and
+every public docstring has the sections the reference renders.
 
 ``mkdocs build --strict`` fails on any warning: a broken link or anchor between pages, a
 cross-reference in a docstring that resolves to nothing, a page missing from the navigation, a
 ``:::`` entry that names nothing. The public names are compared with the ``:::`` entries of
 ``docs/api/`` here, so a new public name without an entry fails even where the site builds.
+
+Docstrings use one form (diffrax's): bold section titles ``**Arguments:**``, ``**Returns:**``,
+``**Raises:**``; a function's Arguments section names each of its parameters, a class's docstring
+names each of its constructor fields.
 """
 
+import ast
+import enum
 import inspect
 import os
 import re
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import fitting
@@ -72,3 +80,88 @@ def test_site_builds_strict(tmp_path):
     # The gallery's images are copied with the site.
     for png in (ROOT / "docs" / "gallery").glob("*.png"):
         assert (site / "gallery" / png.name).is_file()
+
+
+SECTION = re.compile(r"\*\*([A-Z][A-Za-z ]*?)(?: \([^)]*\))?:\*\*")
+
+
+def sections(doc: str) -> dict[str, str]:
+    """{title: text} of a docstring's bold sections (``**Arguments:**`` up to the next title)."""
+    marks = list(SECTION.finditer(doc))
+    return {m.group(1): doc[m.end(): marks[i + 1].start() if i + 1 < len(marks) else len(doc)]
+            for i, m in enumerate(marks)}
+
+
+def named(name: str, text: str) -> bool:
+    """``name`` appears in code quotes: ```name```, ```name[...]``` or ```name(...)```."""
+    return re.search(rf"`{re.escape(name)}[`\[(]", text) is not None
+
+
+def own_body(func) -> list[ast.AST]:
+    """The nodes of a function's own body (nested functions, lambdas and classes left out)."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+    out, stack = [], list(tree.body[0].body)
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda | ast.ClassDef):
+            continue
+        out.append(node)
+        stack.extend(ast.iter_child_nodes(node))
+    return out
+
+
+def returns_value(nodes) -> bool:
+    return any((isinstance(n, ast.Return) and n.value is not None
+                and not (isinstance(n.value, ast.Constant) and n.value.value is None))
+               or isinstance(n, ast.Yield | ast.YieldFrom) for n in nodes)
+
+
+def constructor_fields(cls) -> list[str]:
+    """What a user passes to build one: the constructor's parameters (a dataclass's init fields)."""
+    return [p for p in inspect.signature(cls).parameters if p not in ("self", "args", "kwargs")
+            and not p.startswith("_")]
+
+
+def docstring_problems(qualname: str, obj) -> list[str]:
+    doc = inspect.getdoc(obj) or ""
+    if not doc.strip():
+        return [f"{qualname}: no docstring"]
+    problems = []
+    if re.search(r"\b20\d\d-\d\d-\d\d\b|before the fix|this session", doc):
+        problems.append(f"{qualname}: a dated or development note in the docstring")
+    if inspect.isclass(obj):
+        if issubclass(obj, enum.Enum):
+            return problems
+        text = doc + (inspect.getdoc(obj.__init__) or "" if "__init__" in vars(obj) else "")
+        missing = [f for f in constructor_fields(obj) if not named(f, text)]
+        if missing:
+            problems.append(f"{qualname}: constructor fields not named in the docstring: {missing}")
+        return problems
+    func = inspect.unwrap(obj)
+    params = [p for p in inspect.signature(func).parameters if p != "self"]
+    found = sections(doc)
+    if params:
+        if "Arguments" not in found:
+            problems.append(f"{qualname}: no **Arguments:** section")
+        else:
+            missing = [p for p in params if not named(p, found["Arguments"])]
+            if missing:
+                problems.append(f"{qualname}: parameters not named under **Arguments:**: {missing}")
+    body = own_body(func)
+    if returns_value(body) and "Returns" not in found:
+        problems.append(f"{qualname}: no **Returns:** section")
+    if any(isinstance(n, ast.Raise) for n in body) and "Raises" not in found:
+        problems.append(f"{qualname}: raises, but has no **Raises:** section")
+    return problems
+
+
+def test_every_public_docstring_has_its_sections():
+    """Functions: Arguments naming every parameter, Returns where a value is returned, Raises where
+    the body raises. Classes: every constructor field named. No dated notes."""
+    problems = []
+    for mod in (pj, fitting):
+        for qualname in sorted(public_names(mod)):
+            obj = getattr(mod, qualname.split(".", 1)[1])
+            if inspect.isclass(obj) or inspect.isfunction(inspect.unwrap(obj)):
+                problems += docstring_problems(qualname, obj)
+    assert not problems, f"{len(problems)} docstring problems:\n" + "\n".join(problems)
