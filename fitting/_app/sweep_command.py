@@ -52,6 +52,8 @@ import numpy as np
 from pmpjax._app import ConfigError, build_simulation, example_help, plain, plural, read_config
 from pmpjax.internal import check_rk4_stability, check_seconds, output_dir, write_json
 
+from .output import enable_x64
+
 METRICS = ("A_net", "A_sum", "final_error", "peak_speed")
 _INDEXED = re.compile(r"^(model\.KJ|model\.q_rest_deg|simulation\.q0_deg)\[(\d+)(?:,\s*(\d+))?\]$")
 _SCALARS = ("model.tau0", "planner.k", "planner.tau")
@@ -383,9 +385,7 @@ def add_sweep(sub) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     def run(args) -> int:
-        import jax
-
-        jax.config.update("jax_enable_x64", True)
+        enable_x64()
         s = run_sweep_config(args.config, args.out, progress=not args.no_progress)
         print(f"{plural(s['rows'], 'parameter row')} ({plural(s['chunks_computed'], 'chunk')} computed, "
               f"{s['chunks_reused']} reused), {s['failed']} failed; wrote {Path(s['out']) / 'sweep.csv'}, sweep.json"
