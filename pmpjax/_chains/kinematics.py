@@ -72,8 +72,18 @@ class Chain:
     angle_limit = None
 
     def check_angles(self, name: str, q) -> None:
-        """Refuse joint angles ``q`` (..., n) [rad] beyond ``angle_error`` and warn beyond
-        ``angle_limit`` (degrees typed as radians, most likely); the message names ``name``."""
+        """Refuse joint angles beyond ``angle_error`` and warn beyond ``angle_limit`` (degrees typed
+        as radians, most likely).
+
+        **Arguments:**
+
+        - ``name``: the argument's name, for the message.
+        - ``q``: (..., n) joint angles [rad].
+
+        **Raises:**
+
+        - ``ValueError`` naming ``name`` for angles beyond ``angle_error``.
+        """
         check_joint_angles(name, q, self)
 
     def __init_subclass__(cls, **kwargs):
@@ -99,8 +109,18 @@ class Chain:
         return fk, (jax.jacfwd(fk) if jac_one is None else (lambda q: jac_one(self, q)))
 
     def fk_jac_soa(self, qc):
-        """``qc`` (n, ...) -> ``x`` (m, ...), ``J`` (m, n, ...); default: ``vmap`` of the per-item
-        ``fk`` and ``jacobian``."""
+        """Task positions and Jacobians of component-leading postures (the kernel integrators use).
+
+        Default: ``vmap`` of the per-item ``fk`` and ``jacobian``; closed-form chains override it.
+
+        **Arguments:**
+
+        - ``qc``: (n, ...) joint angles [rad], components leading, the batch trailing.
+
+        **Returns:**
+
+        ``(x, J)``: (m, ...) task positions and (m, n, ...) Jacobians.
+        """
         fk, jac = self._fk_jac_one()
         batch = qc.shape[1:]
         flat = qc.reshape(self.n, -1).T
@@ -121,25 +141,70 @@ class Chain:
         return out.reshape(q.shape[:-1] + out.shape[1:])
 
     def fk(self, q):
-        """Task position ``x`` (..., m) of joint angles ``q`` (..., n) [rad]."""
+        """Task positions of joint angles (forward kinematics, batched).
+
+        **Arguments:**
+
+        - ``q``: (..., n) joint angles [rad].
+
+        **Returns:**
+
+        (..., m) task positions (wrist: screen points [m]).
+
+        **Raises:**
+
+        - ``ValueError`` naming ``q`` for a wrong trailing shape or NaN/inf.
+        """
         q = as_array("q", q, tail=(self.n,))
         return (_per_item if self._jit_eager else Chain._per_item)(self, 0, to_jax(q))
 
     fk._batched = True
 
     def jacobian(self, q):
-        """Task Jacobian ``∂fk/∂q`` (..., m, n) at ``q`` (..., n) (Eq 2)."""
+        """Task Jacobians ``∂fk/∂q`` (Eq 2, batched).
+
+        **Arguments:**
+
+        - ``q``: (..., n) joint angles [rad].
+
+        **Returns:**
+
+        (..., m, n) Jacobians.
+
+        **Raises:**
+
+        - ``ValueError`` naming ``q`` for a wrong trailing shape or NaN/inf.
+        """
         q = as_array("q", q, tail=(self.n,))
         return (_per_item if self._jit_eager else Chain._per_item)(self, 1, to_jax(q))
 
     jacobian._batched = True
 
     def reachable(self, x) -> np.ndarray:
-        """Boolean (...,) mask of task points ``x`` (..., m) inside the reachable workspace."""
+        """Which task points lie inside the reachable workspace (every point for the base class).
+
+        **Arguments:**
+
+        - ``x``: (..., m) task points.
+
+        **Returns:**
+
+        (...,) bool mask.
+        """
         return np.ones(np.shape(x)[:-1], dtype=bool)
 
     def check_target(self, name: str, x) -> None:
-        """Raise ``ValueError`` naming ``name`` if any concrete target is unreachable."""
+        """Refuse unreachable targets (concrete values only; traced ones pass).
+
+        **Arguments:**
+
+        - ``name``: the argument's name, for the message.
+        - ``x``: (..., m) task points.
+
+        **Raises:**
+
+        - ``ValueError`` naming ``name`` and the first unreachable point.
+        """
         if is_concrete(x):
             ok = self.reachable(np.asarray(x, dtype=float))
             if not np.all(ok):
@@ -150,6 +215,12 @@ class Chain:
                 )
 
     def workspace_description(self) -> str:
+        """The reachable workspace in words, for error messages.
+
+        **Returns:**
+
+        A short description (``"unbounded"`` for the base class).
+        """
         return "unbounded"
 
 
@@ -252,7 +323,16 @@ class Wrist(Chain):
         return f"|x| <= d*sin({np.rad2deg(self.max_angle):.0f}°) = {d * np.sin(self.max_angle):.4g} m"
 
     def rotation(self, q):
-        """Hand orientation ``R(q)`` (..., 3, 3) of Eq 6."""
+        """Hand orientations ``R(q)`` of Eq 6 (as :func:`pmpjax.wrist_rotation`).
+
+        **Arguments:**
+
+        - ``q``: (..., 3) joint angles ``(q_PS, q_FE, q_RUD)`` [rad].
+
+        **Returns:**
+
+        (..., 3, 3) rotation matrices.
+        """
         q = jnp.asarray(q)
         a, b, c = q[..., 0], q[..., 1], q[..., 2]
         return rotation_matrix(0, -a) @ rotation_matrix(2, b) @ rotation_matrix(1, c)
