@@ -344,18 +344,52 @@ class MjcfChain(Chain):
         object.__setattr__(self, "path", site_path(m, int(sid)))
 
     def site_position(self, q):
-        """Site position (3,) for one posture ``q`` (n,) (differentiable)."""
+        """Site position for one posture (MJX kinematics, differentiable).
+
+        **Arguments:**
+
+        - ``q``: (n,) joint positions.
+
+        **Returns:**
+
+        (3,) the site's position [m].
+        """
         return site_position(self.mjx_model, self.site_id, q)
 
     def fk_jac_soa(self, qc):
-        """Site position (3, ...) and Jacobian (3, n, ...) at ``qc`` (n, ...): the bodies from the
-        world to the site unrolled with the model's constants (``pmpjax._chains.serial``), fused
-        into the caller's loop like a closed-form chain."""
+        """Site positions and Jacobians of component-leading postures: the bodies from the world to the
+        site unrolled with the model's constants (``pmpjax._chains.serial``), fused into the caller's
+        loop like a closed-form chain.
+
+        **Arguments:**
+
+        - ``qc``: (n, ...) joint positions, components leading.
+
+        **Returns:**
+
+        ``(x, J)``: (3, ...) positions [m] and (3, n, ...) Jacobians.
+        """
         return site_fk_jac_soa(self.path, self.n, qc)
 
     def reachable(self, x):
+        """Task points within 0.99 × the summed link offsets of the first joint.
+
+        **Arguments:**
+
+        - ``x``: (..., 3) points [m].
+
+        **Returns:**
+
+        (...,) bool mask.
+        """
         r = np.linalg.norm(np.asarray(x, dtype=float) - np.asarray(self.center), axis=-1)
         return r <= 0.99 * self.reach
 
     def workspace_description(self):
+        """The reachable ball in words, for error messages.
+
+        **Returns:**
+
+        ``|x - centre| <= radius m``.
+        """
         return f"|x - {np.round(self.center, 3).tolist()}| <= {0.99 * self.reach:.3g} m"

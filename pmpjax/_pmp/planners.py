@@ -33,20 +33,63 @@ class Planner:
     """Base: isotropic gain; ``F = gain(t) (x_d − x)``."""
 
     def gain(self, t):
+        """The isotropic gain ``k(t)`` of the task-space spring ``F = k(t) (x_d − x)``.
+
+        **Arguments:**
+
+        - ``t``: time since the movement's start [s] (array, broadcasts with the planner's leaves).
+
+        **Returns:**
+
+        The gain [N/m] (the minimum-jerk planner's [1/s]).
+        """
         raise NotImplementedError
 
     def start(self, M0):
-        """Resolve start-dependent parameters from ``M0 = B(q0)⁻¹`` (m, m, ...)."""
+        """Resolve start-dependent parameters (Eq 10's gain) at a movement's start posture.
+
+        **Arguments:**
+
+        - ``M0``: (m, m, ...) ``B(q0)⁻¹ = J W⁻¹ Jᵀ`` at the start posture, component-leading.
+
+        **Returns:**
+
+        The planner with those parameters set (itself when it has none).
+        """
         return self
 
     def force_soa(self, t, x, target, M):
+        """The task force ``F`` of component-leading positions (the kernel integrators use).
+
+        **Arguments:**
+
+        - ``t``: time since the movement's start [s].
+        - ``x``: (m, ...) hand positions.
+        - ``target``: (m, ...) targets.
+        - ``M``: (m, m, ...) ``B(q)⁻¹`` at ``x`` (used by the minimum-jerk planner's task-velocity form).
+
+        **Returns:**
+
+        (m, ...) the force ``F``.
+        """
         return _scale(self.gain(t), target - x)
 
     def max_gain(self):
-        """Upper bound of ``gain(t)`` (used for the RK4 stability check)."""
+        """Upper bound of ``gain(t)``, for ``simulate``'s RK4 stability check.
+
+        **Returns:**
+
+        The bound, or None where it is set at the start posture (Eq 10).
+        """
         raise NotImplementedError
 
     def batch_shape(self):
+        """The broadcast shape of the planner's array leaves (its batch).
+
+        **Returns:**
+
+        A shape tuple (``()`` for scalar parameters).
+        """
         return tuple(np.broadcast_shapes(*[jnp.shape(v) for v in self._leaves()]))
 
     def _leaves(self):
@@ -57,7 +100,16 @@ class Planner:
         return self._leaves()
 
     def to_soa(self, batch):
-        """Broadcast leaves to ``batch`` and flatten like the state (see ``simulate``)."""
+        """The planner with its leaves broadcast to ``batch`` and flattened like the state (``simulate``).
+
+        **Arguments:**
+
+        - ``batch``: the batch shape.
+
+        **Returns:**
+
+        A planner of the same type with (prod(batch),) leaves.
+        """
         return jax.tree_util.tree_map(lambda v: jnp.broadcast_to(v, batch).reshape(-1), self)
 
 
