@@ -5,6 +5,7 @@ intervals over trials, and Hotelling's T² between two conditions.
 
 from __future__ import annotations
 
+import warnings
 from functools import partial
 
 import jax
@@ -184,15 +185,22 @@ def _item_generators(key, batch):
     return [np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(i,))) for i in range(B)]
 
 
+#: Bytes of resampled data (``q̇``, ``ẋ``, ``J``, mask) that :func:`bootstrap_ik_weights` hands to the
+#: estimator at once: the replicates go in chunks of this size, so that the memory does not grow
+#: with ``n_boot`` (the estimator's working arrays are a few times their input).
+BOOTSTRAP_CHUNK_BYTES = 96 * 2**20
+
+
 def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=None,
-                         level: float = 0.95, **options) -> BootstrapResult:
+                         level: float = 0.95, estimator: str = "algorithm1", **options) -> BootstrapResult:
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
     An item's replicates depend only on its own data and key: with one key per item, a batch gives
     what its items give one by one with their keys; with one key for a batch, item i (flat order)
     draws from the i-th stream spawned from the key (``numpy.random.SeedSequence``). The estimate on
-    the data and all ``n_boot`` replicates of every item run in one vectorised
-    :func:`estimate_ik_weights` call (items with unusable data are flagged, giving NaN, not raising).
+    the data and the ``n_boot`` replicates of every item run in vectorised calls of the estimator;
+    the replicates go in chunks of equal shape (one compilation) of about ``BOOTSTRAP_CHUNK_BYTES``
+    of data each, so the peak memory does not grow with ``n_boot``.
 
     **Arguments:**
 
@@ -205,7 +213,10 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     - ``key``: a JAX PRNG key (default ``PRNGKey(0)``) or one key per item (shape (...,) + key shape).
     - ``level``: the interval's coverage, in (0, 1): ``lo``/``hi`` are the ``(1 ± level)/2``
       percentiles of the replicates.
-    - ``options``: passed on to :func:`estimate_ik_weights` (``gamma``, ``tol``, ``fixed``, ...).
+    - ``estimator``: ``"algorithm1"`` (:func:`estimate_ik_weights`; items with unusable data are
+      flagged, giving NaN, not raising) or ``"lm"`` (:func:`estimate_ik_weights_lm`, the
+      least-squares weights of Eq 16).
+    - ``options``: passed on to the estimator (``gamma``, ``tol``, ``fixed``, ...).
 
     **Returns:**
 
@@ -215,7 +226,7 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
 
     - ``TypeError`` for keys that are not JAX PRNG keys or an ``on_invalid`` option; ``ValueError``
       naming the argument for data that do not share their axes, a misshaped ``mask``, ``level``
-      outside (0, 1) or ``n_boot < 2``.
+      outside (0, 1), ``n_boot < 2`` or an unknown ``estimator``.
     """
     qdot = as_array("qdot", qdot, tail=(None, None, None), finite=False)
     xdot = as_array("xdot", xdot, tail=(None, None, None), finite=False)
@@ -232,6 +243,8 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
                          f"(..., T, S); got {tuple(qdot.shape)}, {tuple(xdot.shape)}, {tuple(J.shape)}")
     if "on_invalid" in options:
         raise TypeError("`on_invalid` is not an option of bootstrap_ik_weights (unusable items are always flagged)")
+    if estimator not in ("algorithm1", "lm"):
+        raise ValueError(f"`estimator` must be 'algorithm1' or 'lm', got {estimator!r}")
     mask = np.ones(batch + (T, S), bool) if mask is None else np.asarray(mask)
     if mask.shape != batch + (T, S) or mask.dtype != bool:
         raise ValueError(f"`mask` must be a boolean array of shape {batch + (T, S)}, got {mask.dtype} {mask.shape}")
@@ -250,24 +263,67 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     idx = np.concatenate([order[None, ..., :Tb], boot], axis=0)
     n_rep = n_boot + 1
 
-    def take(a):
+    def take(a, ix):
+        """``a``'s trials drawn by ``ix`` (r, ..., Tb): (r, ..., Tb·S, ...)."""
         a = np.asarray(a)
         rest = a.shape[len(batch) + 2:]
-        ix = idx.reshape(idx.shape + (1,) * (1 + len(rest)))
-        g = np.take_along_axis(a[None], ix, axis=len(batch) + 1)
-        return g.reshape((n_rep,) + batch + (Tb * S,) + rest)
+        g = np.take_along_axis(a[None], ix.reshape(ix.shape + (1,) * (1 + len(rest))), axis=len(batch) + 1)
+        return g.reshape(ix.shape[:1] + batch + (Tb * S,) + rest)
 
     used = np.arange(Tb) < n_ok  # (..., Tb)
-    mk = take(mask).reshape((n_rep,) + batch + (Tb, S)) & used[..., None]
-    res = estimate_ik_weights(take(qdot), take(xdot), take(J), on_invalid="flag",
-                              mask=mk.reshape((n_rep,) + batch + (Tb * S,)), **options)
+    m, B = J.shape[-2], int(np.prod(batch, dtype=int))
+    per_rep = 8 * B * Tb * S * (m * n + m + n + 1)
+    chunk = int(min(n_rep, max(1, BOOTSTRAP_CHUNK_BYTES // max(per_rep, 1))))
+    parts = []
+    for c0 in range(0, n_rep, chunk):
+        sel = np.arange(c0, c0 + chunk)
+        sel = np.where(sel < n_rep, sel, 0)  # the last chunk padded to the same shape (one compilation)
+        ix = idx[sel]
+        mk = take(mask, ix).reshape((chunk,) + batch + (Tb, S)) & used[..., None]
+        mk = mk.reshape((chunk,) + batch + (Tb * S,))
+        if estimator == "lm":
+            from .weights import estimate_ik_weights_lm
+
+            gq, gx, gJ = take(qdot, ix), take(xdot, ix), take(J, ix)
+            ok = ~_unusable(gq, gx, gJ, mk)
+            res = estimate_ik_weights_lm(np.where(ok[..., None, None], gq, 0.0), np.where(ok[..., None, None], gx, 0.0),
+                                         np.where(ok[..., None, None, None], gJ, _padding_jacobian(m, n)),
+                                         mask=mk | ~ok[..., None], **options)
+            st = np.where(ok, np.asarray(res.status), int(pj.Status.INVALID_INPUT))
+            w = np.where(ok[..., None], np.asarray(res.w), np.nan)
+        else:
+            res = estimate_ik_weights(take(qdot, ix), take(xdot, ix), take(J, ix), on_invalid="flag", mask=mk,
+                                      **options)
+            st, w = np.asarray(res.status), np.asarray(res.w)
+        keep = slice(0, min(chunk, n_rep - c0))
+        parts.append((w[keep], st[keep]))
+    w_all = np.concatenate([p[0] for p in parts])
+    st = np.concatenate([p[1] for p in parts])
+    conv = st == int(pj.Status.SUCCESSFUL)
     a = (1.0 - float(level)) / 2.0
-    w_all, conv, st = (np.asarray(v) for v in (res.w, res.converged, res.status))
     ws = w_all[1:]
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():  # (items without data: NaN)
+        warnings.filterwarnings("ignore", "All-NaN slice", RuntimeWarning)
         lo, hi = np.nanquantile(ws, a, axis=0), np.nanquantile(ws, 1.0 - a, axis=0)
     return BootstrapResult(w=to_jax(w_all[0]), lo=to_jax(lo), hi=to_jax(hi), samples=to_jax(ws),
                            converged=to_jax(conv[1:]), status=to_jax(st[1:]), w_status=to_jax(st[0]))
+
+
+def _padding_jacobian(m, n):
+    """The Jacobian put in the samples of an unusable item (any full-rank one: they are masked)."""
+    return np.eye(m, n)
+
+
+def _unusable(qdot, xdot, J, mask):
+    """(...) items the LM estimator would refuse: no valid sample, or NaN/inf or a rank-deficient
+    Jacobian at a valid one (Algorithm 1 flags them itself)."""
+    fin = np.isfinite(qdot).all(-1) & np.isfinite(xdot).all(-1) & np.isfinite(J).all((-2, -1))
+    JJ = np.einsum("...ij,...kj->...ik", np.nan_to_num(J), np.nan_to_num(J))
+    m = J.shape[-2]
+    with np.errstate(all="ignore"):
+        tr = np.trace(JJ, axis1=-2, axis2=-1) / m
+        full = np.linalg.det(JJ) / np.where(tr > 0, tr, 1.0) ** m > 1e-10
+    return ~(mask.any(-1)) | np.any(mask & ~(fin & full), axis=-1)
 
 
 @pytree_dataclass

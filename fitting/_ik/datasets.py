@@ -308,7 +308,8 @@ def prosthetic_simulation(conditions=PROSTHETIC_CONDITIONS, *, w_user=(1.0, 1.0,
 
 def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
                      gamma: float = 0.6, samples: int = 100, n_boot: int = 100, key=None,
-                     level: float = 0.95, per_motion: bool = False, **options) -> dict:
+                     level: float = 0.95, per_motion: bool = False, estimator: str = "algorithm1",
+                     **options) -> dict:
     """IK weights of HuG-MP subjects per task (or per task × motion) with bootstrap intervals.
 
     Loads each subject (``pmpjax.load_hugmp``; irregular cells are skipped and reported), derives
@@ -325,7 +326,9 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     - ``samples``: points per motion after time normalisation (≥ 2).
     - ``n_boot``, ``key``, ``level``: as :func:`bootstrap_ik_weights`.
     - ``per_motion``: weights per task × motion instead of per task.
-    - ``options``: passed on to :func:`estimate_ik_weights`.
+    - ``estimator``: ``"algorithm1"`` (:func:`estimate_ik_weights`) or ``"lm"``
+      (:func:`estimate_ik_weights_lm`).
+    - ``options``: passed on to the estimator.
 
     **Returns:**
 
@@ -388,7 +391,7 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     have = r(mk).any(-1).sum(-1) > 0  # items with at least one trial
     mkr = r(mk) & have[..., None, None]
     res = bootstrap_ik_weights(r(qd), r(xd), r(J), mask=mkr, n_boot=n_boot, key=key, level=level,
-                               gamma=gamma, fixed=fixed, **options)
+                               estimator=estimator, gamma=gamma, fixed=fixed, **options)
     nan = lambda a: np.where(have[..., None], np.asarray(a), np.nan)  # noqa: E731
     st = np.asarray(res.status)
     return dict(w=nan(res.w), lo=nan(res.lo), hi=nan(res.hi), status=np.asarray(res.w_status),
