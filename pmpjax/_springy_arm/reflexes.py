@@ -218,6 +218,17 @@ class ReflexNetwork:
         object.__setattr__(self, "rest", to_jax(as_array("rest", self.rest, tail=(None,)), float))
 
     def init(self, q_set0):
+        """The controller's state at the start of a run (the controller protocol of
+        :func:`pmpjax.run_controller`).
+
+        **Arguments:**
+
+        - ``q_set0``: (n,) the first set-point [rad].
+
+        **Returns:**
+
+        The ``ReflexState`` (set-point, target, concurrent moves in ``slots``, mode, lead reference).
+        """
         S, n = self.slots, q_set0.shape[-1]
         z = jnp.zeros((), q_set0.dtype)
         return ReflexState(
@@ -233,6 +244,22 @@ class ReflexNetwork:
         )
 
     def step(self, s: ReflexState, obs, inp, K):
+        """One control period: touch, lead and new targets switch the mode (reach, grasp, withdraw,
+        lead) and start moves; the summed moves give the set-point (the controller protocol of
+        :func:`pmpjax.run_controller`).
+
+        **Arguments:**
+
+        - ``s``: the ``ReflexState``.
+        - ``obs``: the arm's ``ArmObs`` (``t``, ``q``, ``qdot``, spring torque ``tau``, ``touch``,
+          ``hand``, ``gravity``).
+        - ``inp``: this step's :class:`ReflexInputs` entries.
+        - ``K``: (n,) joint stiffness [Nm/rad].
+
+        **Returns:**
+
+        ``(state, θ_set (n,) [rad], log)``; the log holds ``mode`` and ``tau_ref``.
+        """
         t = obs.t
         touch = jnp.maximum(obs.touch, inp.touch)
         palm, back = touch[0] > self.touch_threshold, touch[1] > self.touch_threshold

@@ -143,13 +143,32 @@ class PointingRecording:
         return tuple(str(v) for v in self.subject[np.sort(first)])
 
     def trials(self, subject: str) -> tuple[int, ...]:
-        """Trial numbers of ``subject`` in order of first appearance."""
+        """Trial numbers of a subject, in order of first appearance.
+
+        **Arguments:**
+
+        - ``subject``: a subject name.
+
+        **Returns:**
+
+        The trial numbers (tuple of int; empty for an unknown subject).
+        """
         tr = self.trial[self.subject == subject]
         _, first = np.unique(tr, return_index=True)
         return tuple(int(v) for v in tr[np.sort(first)])
 
     def rows(self, subject: str, trial: int) -> np.ndarray:
-        """Row indices of one trial, in file order."""
+        """Row indices of one trial, in file order.
+
+        **Arguments:**
+
+        - ``subject``: a subject name.
+        - ``trial``: a trial number.
+
+        **Returns:**
+
+        (k,) int row indices.
+        """
         return np.flatnonzero((self.subject == subject) & (self.trial == trial))
 
     @property
@@ -158,8 +177,18 @@ class PointingRecording:
         return screen_point_from_quat(self.quat, self.d)
 
     def where(self, row: int, column: str | None = None) -> str:
-        """``file:line`` (read from a file) or ``source, row i`` (built in memory), and the
-        column, for messages."""
+        """Where a row came from, for messages: ``file:line`` (read from a file) or ``source, row i``
+        (built in memory), and the column.
+
+        **Arguments:**
+
+        - ``row``: a row index.
+        - ``column``: a column name (of the CSV format) to add, or None.
+
+        **Returns:**
+
+        The location (str).
+        """
         col = f", column {column!r} (#{COLUMNS.index(column) + 1})" if column in COLUMNS else ""
         at = f"{self.source}, row {int(row)}" if self.line is None else f"{self.source}:{int(self.line[row])}"
         return at + col
