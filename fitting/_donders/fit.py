@@ -105,7 +105,17 @@ class DondersFit:
         return self.status == Status.SUCCESSFUL
 
     def report(self, i: int = 0) -> str:
-        """Human-readable identifiability report of subject ``i``."""
+        """Human-readable identifiability report of one subject: which combinations of Donders'
+        coefficients the data determine, with their standard errors.
+
+        **Arguments:**
+
+        - ``i``: the subject's index.
+
+        **Returns:**
+
+        The report (str).
+        """
         lines = [
             f"subject {i}: {Status(int(self.status[i])).message}, {int(self.steps[i])} LM steps, "
             f"RMS residual {np.rad2deg(self.rms[i]):.3g} deg, n = {int(self.n_samples[i])}"

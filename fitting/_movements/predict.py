@@ -54,15 +54,25 @@ class MovementPrediction:
         return int(self.rmse_deg.shape[0])
 
     def predictors(self) -> dict:
-        """``{"model": ..., **baselines}``, each a dict of ``q_pred``, ``rmse_deg``,
-        ``final_error_deg``, ``status``."""
+        """The fitted model's and the baselines' predictions.
+
+        **Returns:**
+
+        ``{"model": ..., **baselines}``, each a dict of ``q_pred``, ``rmse_deg``, ``final_error_deg``,
+        ``status``.
+        """
         model = dict(q_pred=self.q_pred, rmse_deg=self.rmse_deg, final_error_deg=self.final_error_deg,
                      status=self.status)
         return {"model": model, **self.baselines}
 
     def movement_rows(self) -> list[dict]:
         """One row per reach: subject, recording, window [s], and each predictor's RMSE and final
-        error [deg] (empty where its simulation failed)."""
+        error [deg] (empty where its simulation failed).
+
+        **Returns:**
+
+        A list of dicts (the rows of ``movement_predictions.csv``).
+        """
         preds = self.predictors()
         fmt = lambda v: "" if not np.isfinite(v) else round(float(v), 4)  # noqa: E731
         return [{"subject": str(self.subject[i]), "recording": str(self.recording[i]),
@@ -73,8 +83,13 @@ class MovementPrediction:
                 for i in range(len(self))]
 
     def summary(self) -> list[dict]:
-        """One row per subject and one for all: reaches predicted, and per predictor the median
-        joint RMSE and median final-posture error [deg] over its successful simulations."""
+        """One row per subject and one for all: reaches predicted, and per predictor the median joint
+        RMSE and median final-posture error [deg] over its successful simulations.
+
+        **Returns:**
+
+        A list of dicts (the rows of ``movement_prediction_summary.csv``).
+        """
         preds = self.predictors()
         groups = [(s, self.subject == s) for s in dict.fromkeys(self.subject.tolist())]
         rows = []

@@ -120,7 +120,20 @@ class PointingAnalysis:
     source: str
 
     def subject_index(self, subject) -> int:
-        """Index of ``subject`` (a name or an index); ``ValueError`` naming it otherwise."""
+        """The row of a subject.
+
+        **Arguments:**
+
+        - ``subject``: a subject name or an index.
+
+        **Returns:**
+
+        Its index (int).
+
+        **Raises:**
+
+        - ``ValueError`` naming ``subject`` when it is neither.
+        """
         if isinstance(subject, int | np.integer) and not isinstance(subject, bool):
             if 0 <= subject < len(self.subjects):
                 return int(subject)
@@ -131,11 +144,19 @@ class PointingAnalysis:
 
     def statistics_rows(self, predictions: dict | None = None) -> list[dict]:
         """The statistics as rows (one per subject × movement, floats; NaN where untested):
-        ``n``, mean duration ``T_s`` [s], mean ``A_sum``, ``A_net`` (normalised by (π/12)²) with
-        their t-test p-values and the SD of ``A_net``; for every ``name: PointingPrediction`` in
-        ``predictions`` the model's ``A_net_model_<name>`` and the p-value ``p_model_<name>`` of the
-        measured areas against it. The table behind the main job's and ``pmpjax analyze-pointing``'s
-        ``pointing_statistics.csv``."""
+        ``n``, mean duration ``T_s`` [s], mean ``A_sum``, ``A_net`` (normalised by (π/12)²) with their
+        t-test p-values and the SD of ``A_net``; for every prediction the model's
+        ``A_net_model_<name>`` and the p-value ``p_model_<name>`` of the measured areas against it. The
+        table behind the main job's and ``pmpjax analyze-pointing``'s ``pointing_statistics.csv``.
+
+        **Arguments:**
+
+        - ``predictions``: optional ``{name: PointingPrediction}``.
+
+        **Returns:**
+
+        A list of dicts.
+        """
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mean_net, sd_net = np.nanmean(self.a_net, axis=2), np.nanstd(self.a_net, axis=2, ddof=1)
@@ -155,7 +176,17 @@ class PointingAnalysis:
 
     def table(self, subject=None, *, alpha: float = _ALPHA) -> str:
         """The statistics as text: per movement n, mean A_sum and A_net with their p-values, and
-        hysteresis per direction (``*`` marks p < ``alpha``)."""
+        hysteresis per direction (``*`` marks p < ``alpha``).
+
+        **Arguments:**
+
+        - ``subject``: a subject name or index (default every subject).
+        - ``alpha``: the significance level marked.
+
+        **Returns:**
+
+        The table (str).
+        """
         rows = []
         for s in [self.subject_index(subject)] if subject is not None else range(len(self.subjects)):
             rows.append(f"{self.subjects[s]}: movement   n   A_sum     p       A_net     p       hyst p")

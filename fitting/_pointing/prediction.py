@@ -130,7 +130,12 @@ class PointingPrediction:
     alpha: float
 
     def table(self) -> str:
-        """Per subject: the movements whose ``A_net`` the model captures (paper Results)."""
+        """Per subject: the movements whose ``A_net`` the model captures (paper Results).
+
+        **Returns:**
+
+        The table (str).
+        """
         out = []
         for s, name in enumerate(self.subjects):
             caught = [lab for lab, c in zip(self.labels, self.captured[s]) if c]

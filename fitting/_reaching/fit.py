@@ -345,6 +345,20 @@ class ReachingFit:
         return [status_message(s) for s in self.status]
 
     def subject_index(self, subject) -> int:
+        """The row of a subject.
+
+        **Arguments:**
+
+        - ``subject``: a subject number or name (``1`` or ``"S01"``).
+
+        **Returns:**
+
+        Its index (int).
+
+        **Raises:**
+
+        - ``ValueError`` for a subject that is not in the fit.
+        """
         return self.subjects.index(_subject_name(subject))
 
 

@@ -104,15 +104,25 @@ class ReachingPrediction:
     final_error_donders_deg: np.ndarray | None = None
 
     def predictors(self) -> dict:
-        """``{name: BaselinePrediction}`` with the fitted model first (named ``"model"``)."""
+        """The fitted model's and the baselines' predictions.
+
+        **Returns:**
+
+        ``{name: BaselinePrediction}`` with the fitted model first (named ``"model"``).
+        """
         own = BaselinePrediction(self.q_pred, self.x_pred, self.final_error_deg, self.rmse_deg, self.status)
         return {"model": own, **self.baselines}
 
     def summary(self) -> list[dict]:
-        """Rows ``{subject, task, predictor, n, final_error_deg, rmse_deg, n_donders,
-        final_error_donders_deg}``: means over the held-out motions of each subject × task (task
-        "all" pools the tasks), NaN rows ignored; the Donders columns (the model's equilibrium
-        postures, over every motion whose equilibrium converged) only in the model's rows."""
+        """Means over the held-out motions of each subject × task (task "all" pools the tasks), NaN
+        rows ignored; the Donders columns (the model's equilibrium postures, over every motion whose
+        equilibrium converged) only in the model's rows.
+
+        **Returns:**
+
+        Rows ``{subject, task, predictor, n, final_error_deg, rmse_deg, n_donders,
+        final_error_donders_deg}``.
+        """
         mean = lambda a, ok: float(np.mean(a[ok])) if ok.any() else np.nan  # noqa: E731
         don = self.final_error_donders_deg
         rows = []
@@ -131,8 +141,13 @@ class ReachingPrediction:
         return rows
 
     def to_csv(self, path) -> None:
-        """Write one row per held-out motion and predictor (final error and RMSE [deg]; the
-        model's rows also its Donders final-posture error)."""
+        """Write one row per held-out motion and predictor (final error and RMSE [deg]; the model's
+        rows also its Donders final-posture error).
+
+        **Arguments:**
+
+        - ``path``: the CSV file to write.
+        """
         lines = ["subject,task,rep,index,predictor,status,final_error_deg,rmse_deg,final_error_donders_deg"]
         don = self.final_error_donders_deg
         for name, b in self.predictors().items():

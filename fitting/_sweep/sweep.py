@@ -82,7 +82,16 @@ class SweepResult:
         return out
 
     def reason(self, row: int) -> str:
-        """Why ``row`` failed ('' when it did not)."""
+        """Why a row failed.
+
+        **Arguments:**
+
+        - ``row``: the row index.
+
+        **Returns:**
+
+        The reason ('' when it did not fail).
+        """
         code = int(self.status[row])
         if code == 0:
             return ""
@@ -98,9 +107,21 @@ class SweepResult:
         return "; ".join(parts)
 
     def table(self, *, pandas: bool = False):
-        """One row per parameter set: parameter columns, output columns (trailing axes flattened
-        as ``name[i]``/``name[i,j]``), ``failed`` and ``reason``. A dict of (N,) NumPy columns, or
-        a ``pandas.DataFrame`` with ``pandas=True`` (needs the optional pandas extra)."""
+        """One row per parameter set: parameter columns, output columns (trailing axes flattened as
+        ``name[i]``/``name[i,j]``), ``failed`` and ``reason``.
+
+        **Arguments:**
+
+        - ``pandas``: return a ``pandas.DataFrame`` (needs the optional pandas extra).
+
+        **Returns:**
+
+        A dict of (N,) NumPy columns, or the DataFrame.
+
+        **Raises:**
+
+        - ``ImportError`` with ``pandas=True`` when pandas is not installed.
+        """
         cols: dict[str, np.ndarray] = {}
         for name, a in self.params.items():
             cols.update(_columns(name, np.asarray(a)))
