@@ -111,12 +111,31 @@ class MovementFit:
         return [status_message(s) for s in self.status]
 
     def subject_index(self, subject) -> int:
+        """The row of a subject.
+
+        **Arguments:**
+
+        - ``subject``: a subject name.
+
+        **Returns:**
+
+        Its index (int).
+
+        **Raises:**
+
+        - ``ValueError`` for a subject that is not in the fit.
+        """
         return self.subjects.index(str(subject))
 
     def parameter_rows(self) -> list[dict]:
         """One row per subject and parameter: ``subject``, ``parameter``, ``value``, ``stderr`` (of
-        the fitted parameter, in ``param_names``' units), ``identified`` (False: the parameter loads
-        on an unidentified direction, its value a gauge)."""
+        the fitted parameter, in ``param_names``' units), ``identified`` (False: the parameter loads on
+        an unidentified direction, its value a gauge).
+
+        **Returns:**
+
+        A list of dicts (the rows of ``movement_parameters.csv``).
+        """
         rows = []
         for a, s in enumerate(self.subjects):
             gauge = {name for direction in self.unidentified[a] for name in direction}
@@ -126,7 +145,12 @@ class MovementFit:
         return rows
 
     def summary(self) -> list[dict]:
-        """One row per subject: status, time constants, training error, integration error, AIC/BIC."""
+        """One row per subject: status, time constants, training error, integration error, AIC/BIC.
+
+        **Returns:**
+
+        A list of dicts (the rows of ``movement_fit.csv``).
+        """
         unit = "s" if self.time_constants == "seconds" else "T"
         rows = []
         for a, s in enumerate(self.subjects):
