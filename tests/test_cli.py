@@ -1,6 +1,7 @@
 """The command line's runner: artefacts, report, skipping, failures, interruption, bad input."""
 
 import contextlib
+import csv
 import json
 import os
 import re
@@ -457,7 +458,14 @@ def test_simulate_command_runs_the_shipped_figure3_config(tmp_path, capsys, monk
     s = json.loads((tmp_path / "summary.json").read_text())
     assert len(s["targets"]) == 8 and max(s["final_task_error"]) < 1e-6
     lines = (tmp_path / "trajectories.csv").read_text().splitlines()
-    assert lines[0] == "target,t,q0,q1,q2,x0,x1" and len(lines) == 1 + 8 * 41
+    # columns as the configuration names them, numbered from 1, with units; x1, x2 the target's coordinates
+    assert lines[0] == "target,t [s],q1 [rad],q2 [rad],q3 [rad],x1 [m],x2 [m]" and len(lines) == 1 + 8 * 41
+    last = {r["target"]: r for r in csv.DictReader(lines)}  # (each target's final sample)
+    for name, (x1, x2) in pj.center_out_targets().items():
+        if name in last:
+            assert float(last[name]["x1 [m]"]) == pytest.approx(x1, abs=1e-6)
+            assert float(last[name]["x2 [m]"]) == pytest.approx(x2, abs=1e-6)
+    assert float(last["NE"]["t [s]"]) == pytest.approx(0.4)
     assert (tmp_path / "paths.png").read_bytes()[:8] == PNG_MAGIC
     assert capsys.readouterr().out.startswith("8 movements, ")
     # The exit-status policy: a movement that did not end successfully is written, and exits 1.

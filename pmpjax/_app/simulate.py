@@ -29,8 +29,9 @@ def run_simulation_config(path, out) -> dict:
     except ValueError as e:
         raise ConfigError(f"{path}: {e}") from None
     t, q, x = (np.asarray(a) for a in (traj.t, traj.q, traj.x))
-    rows = ["target,t," + ",".join(f"q{i}" for i in range(q.shape[-1])) + ","
-            + ",".join(f"x{i}" for i in range(x.shape[-1]))]
+    # Columns numbered from 1 with their units, as the configuration names them (targets [[x1, x2], ...] [m]).
+    rows = [",".join(["target", "t [s]", *(f"q{i + 1} [rad]" for i in range(q.shape[-1])),
+                      *(f"x{i + 1} [m]" for i in range(x.shape[-1]))])]
     for b, name in enumerate(opt["names"]):
         for s in range(t.shape[0]):
             rows.append(",".join([name, f"{t[s]:.6g}", *(f"{v:.9g}" for v in q[b, s]), *(f"{v:.9g}" for v in x[b, s])]))
@@ -41,8 +42,8 @@ def run_simulation_config(path, out) -> dict:
         ax.plot(*targets[b], "k+")
         ax.annotate(name, targets[b], fontsize=8)
     ax.set_aspect("equal")
-    ax.set_xlabel("x1")
-    ax.set_ylabel("x2")
+    ax.set_xlabel("x1 [m]")
+    ax.set_ylabel("x2 [m]")
     fig.savefig(out / "paths.png", dpi=110)
     plt.close(fig)
     summary = {
