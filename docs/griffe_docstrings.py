@@ -6,7 +6,9 @@ pmpjax's docstrings are Markdown with bold section titles (``**Arguments:**``, `
 - a role becomes a cross-reference when it names a public name of ``pmpjax`` or ``fitting``
   (``[`simulate`][pmpjax.simulate]``), and inline code otherwise;
 - a list that follows a paragraph line directly (``**Arguments:**`` then ``- ``q``: ...``) gets the
-  blank line Markdown needs to see a list.
+  blank line Markdown needs to see a list;
+
+and a method that overrides a documented one without a docstring of its own shows the inherited one.
 """
 
 from __future__ import annotations
@@ -61,8 +63,39 @@ def rewrite(text: str, home: str) -> str:
     return _lists(ROLE.sub(lambda m: _role(m, home), text))
 
 
+def _classes(obj):
+    """Every class defined in a module tree (aliases, i.e. re-exports, left out)."""
+    for member in obj.members.values():
+        if member.is_alias:
+            continue
+        if member.is_class:
+            yield member
+            yield from _classes(member)
+        elif member.is_module:
+            yield from _classes(member)
+
+
 class Docstrings(griffe.Extension):
-    """Rewrite Sphinx roles and list spacing in every docstring of pmpjax and fitting."""
+    """Rewrite Sphinx roles and list spacing in every docstring of pmpjax and fitting, and give a
+    method that overrides a documented one without a docstring of its own the inherited one (as
+    ``inspect.getdoc`` and ``help()`` do)."""
+
+    def on_package(self, *, pkg, **kwargs) -> None:
+        if pkg.name not in PUBLIC:
+            return
+        for cls in _classes(pkg):
+            try:
+                mro = cls.mro()
+            except Exception:  # a base outside the loaded packages: nothing to inherit from here
+                continue
+            for name, member in cls.members.items():
+                if member.is_alias or not member.is_function or member.docstring is not None:
+                    continue
+                for base in mro:
+                    inherited = base.members.get(name)
+                    if inherited is not None and not inherited.is_alias and inherited.docstring is not None:
+                        member.docstring = griffe.Docstring(inherited.docstring.value, parent=member)
+                        break
 
     def on_instance(self, *, node, obj, agent, **kwargs) -> None:
         doc = obj.docstring
