@@ -514,7 +514,7 @@ def test_bootstrap_intervals_are_calibrated_against_monte_carlo():
     qd, xd, J = ik_fig1_numpy(np.random.default_rng(1), n_reps=R, K=T * S)
     split = lambda a: a.reshape(R, T, S, *a.shape[2:])  # noqa: E731
     res = fitting.bootstrap_ik_weights(split(qd), split(xd), split(J), n_boot=32, gamma=0.6, max_steps=400,
-                                       key=jax.random.PRNGKey(3))
+                                       seed=jax.random.PRNGKey(3))
     w, lo, hi, smp = (np.asarray(a) for a in (res.w, res.lo, res.hi, res.samples))
     assert np.all(np.isfinite(w)) and np.mean(np.asarray(res.converged)) > 0.8
     mc = w[:, 1:].std(0, ddof=1)  # joint 1 is pinned at 1 by the normalisation

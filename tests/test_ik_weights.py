@@ -675,7 +675,7 @@ def test_bootstrap_intervals_cover_the_truth(estimator, options):
     w = np.array([1.0, 0.5, 0.25])
     P = 150
     q, x, J = _trial_data(rng, P, 20, 3, w, 0.001, 0.003)
-    res = fitting.bootstrap_ik_weights(q, x, J, n_boot=100, key=jax.random.PRNGKey(4), gamma=0.6,
+    res = fitting.bootstrap_ik_weights(q, x, J, n_boot=100, seed=jax.random.PRNGKey(4), gamma=0.6,
                                        estimator=estimator, **options)
     assert np.mean(np.asarray(res.converged)) > 0.85  # (measured: Algorithm 1 0.89)
     lo, hi = np.asarray(res.lo), np.asarray(res.hi)
@@ -697,7 +697,7 @@ def test_bootstrap_in_chunks_gives_the_replicates_of_one_call(monkeypatch, estim
     q, x, J = _trial_data(rng, 3, 6, 5, np.array([1.0, 0.5, 0.25]), 0.05, 0.05)
     mask = np.ones(q.shape[:-1], bool)
     mask[2] = False
-    kw = dict(n_boot=8, key=jax.random.PRNGKey(2), gamma=0.6, estimator=estimator, mask=mask)
+    kw = dict(n_boot=8, seed=jax.random.PRNGKey(2), gamma=0.6, estimator=estimator, mask=mask)
     one = fitting.bootstrap_ik_weights(q, x, J, **kw)
     per_rep = 8 * 3 * 6 * 5 * (1 * 3 + 1 + 3 + 1)  # items × trials × samples × (J, ẋ, q̇, mask) in bytes
     monkeypatch.setattr(analysis, "BOOTSTRAP_CHUNK_BYTES", 4 * per_rep)
@@ -725,15 +725,15 @@ def test_bootstrap_batch_equals_singles_and_bad_input():
     mask[1, 4:] = False  # a subject with fewer trials
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
     kw = dict(n_boot=8, gamma=0.6, max_steps=80)
-    res = fitting.bootstrap_ik_weights(q, x, J, mask=mask, key=keys, **kw)
+    res = fitting.bootstrap_ik_weights(q, x, J, mask=mask, seed=keys, **kw)
     for i in (0, 1):
-        one = fitting.bootstrap_ik_weights(q[i], x[i], J[i], mask=mask[i], key=keys[i], **kw)
+        one = fitting.bootstrap_ik_weights(q[i], x[i], J[i], mask=mask[i], seed=keys[i], **kw)
         for f in ("w", "lo", "hi"):
             np.testing.assert_allclose(getattr(one, f), getattr(res, f)[i], atol=1e-10, rtol=0)
         np.testing.assert_allclose(one.samples, res.samples[:, i], atol=1e-10, rtol=0)
-    shared = fitting.bootstrap_ik_weights(q, x, J, mask=mask, key=keys[0], **kw)
+    shared = fitting.bootstrap_ik_weights(q, x, J, mask=mask, seed=keys[0], **kw)
     assert not np.allclose(shared.samples[:, 0], shared.samples[:, 2])  # items draw differently
-    bad = fitting.bootstrap_ik_weights(q, x, J, mask=np.zeros_like(mask), key=keys, **kw)
+    bad = fitting.bootstrap_ik_weights(q, x, J, mask=np.zeros_like(mask), seed=keys, **kw)
     assert np.all(np.isnan(bad.w)) and np.all(bad.w_status == S.INVALID_INPUT)
     boot = fitting.bootstrap_ik_weights
     with pytest.raises(ValueError, match="level"):
@@ -744,8 +744,10 @@ def test_bootstrap_batch_equals_singles_and_bad_input():
         boot(q, x, J, mask=mask[..., :3])
     with pytest.raises(ValueError, match="share"):
         boot(q, x[:, :5], J)
-    with pytest.raises(TypeError, match="key"):
-        boot(q, x, J, key=3)
+    with pytest.raises(TypeError, match="seed"):
+        boot(q, x, J, seed=0.5)
+    with pytest.warns(DeprecationWarning, match="key"), pytest.raises(TypeError, match="seed"):
+        boot(q, x, J, key=0.5)  # the old keyword, passed on under the new one
     with pytest.raises(TypeError, match="on_invalid"):
         boot(q, x, J, on_invalid="raise")
     with pytest.raises(ValueError, match="gamma"):

@@ -15,11 +15,12 @@ import numpy as np
 import pmpjax as pj
 from pmpjax.internal import (
     as_array,
+    as_prng_key,
     check_positive,
     check_positive_int,
-    check_prng_key,
     fast_compile_jit,
     pytree_dataclass,
+    renamed_keywords,
     to_jax,
 )
 
@@ -168,16 +169,18 @@ class BootstrapResult:
 def _item_generators(key, batch):
     """One NumPy generator per item (flat order): ``key`` one JAX key per item (batch + key
     shape) -> each item's own stream; one key for a batch -> item i gets the i-th spawned stream
-    of the key; one key for an unbatched call -> the key's own stream."""
-    key = jax.random.PRNGKey(0) if key is None else key
+    of the key; one key for an unbatched call -> the key's own stream; an integer (default 0) is
+    ``jax.random.PRNGKey`` of it."""
+    if key is None or isinstance(key, int | np.integer):
+        key = as_prng_key("seed", 0 if key is None else key)
     typed = jnp.issubdtype(getattr(key, "dtype", np.float64), jax.dtypes.prng_key)
     data = np.asarray(jax.random.key_data(key) if typed else key)
     per_item = data.shape[:-1] == batch and data.ndim > 1 and data.shape[-1] == 2
     if per_item:
         if data.dtype != np.uint32:
-            raise TypeError(f"`key` must be JAX PRNG key(s), got dtype {data.dtype}")
+            raise TypeError(f"`seed` must be an integer or JAX PRNG key(s), got dtype {data.dtype}")
         return [np.random.default_rng(np.random.SeedSequence([int(v) for v in k])) for k in data.reshape(-1, 2)]
-    check_prng_key("key", key)
+    as_prng_key("seed", key)
     entropy = [int(v) for v in data.reshape(-1)]
     if not batch:
         return [np.random.default_rng(np.random.SeedSequence(entropy))]
@@ -191,7 +194,8 @@ def _item_generators(key, batch):
 BOOTSTRAP_CHUNK_BYTES = 96 * 2**20
 
 
-def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=None,
+@renamed_keywords(key="seed")
+def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, seed=None,
                          level: float = 0.95, estimator: str = "algorithm1", **options) -> BootstrapResult:
     """Bootstrap confidence intervals of IK weights, resampling whole trials with replacement.
 
@@ -210,7 +214,8 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     - ``mask``: optional (..., T, S) bool valid samples (a trial with no valid sample is never drawn;
       each replicate draws as many trials as the item has valid ones).
     - ``n_boot``: replicates per item (≥ 2).
-    - ``key``: a JAX PRNG key (default ``PRNGKey(0)``) or one key per item (shape (...,) + key shape).
+    - ``seed``: an integer or a JAX PRNG key (default 0, i.e. ``PRNGKey(0)``), or one key per item
+      (shape (...,) + key shape).
     - ``level``: the interval's coverage, in (0, 1): ``lo``/``hi`` are the ``(1 ± level)/2``
       percentiles of the replicates.
     - ``estimator``: ``"algorithm1"`` (:func:`estimate_ik_weights`; items with unusable data are
@@ -248,7 +253,7 @@ def bootstrap_ik_weights(qdot, xdot, J, *, mask=None, n_boot: int = 200, key=Non
     mask = np.ones(batch + (T, S), bool) if mask is None else np.asarray(mask)
     if mask.shape != batch + (T, S) or mask.dtype != bool:
         raise ValueError(f"`mask` must be a boolean array of shape {batch + (T, S)}, got {mask.dtype} {mask.shape}")
-    gens = _item_generators(key, batch)
+    gens = _item_generators(seed, batch)
     trial_ok = mask.any(-1)  # (..., T)
     n_ok = trial_ok.sum(-1)[..., None]  # (..., 1)
     # each replicate draws as many trials as the item has: keep max(n_ok) slots, mask the rest

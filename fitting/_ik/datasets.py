@@ -20,7 +20,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import pmpjax as pj
-from pmpjax.internal import check_positive_int, fast_compile_jit, integrate, minimum_jerk, mv, pinv_apply_diag_soa
+from pmpjax.internal import (
+    check_positive_int,
+    fast_compile_jit,
+    integrate,
+    minimum_jerk,
+    mv,
+    pinv_apply_diag_soa,
+    renamed_keywords,
+)
 
 # Contribution coefficients reported in the paper's Discussion (Eq 26) for Experiment 1:
 # Natural β = (.04, .27, .65, .04), Viscous β = (.09, .68, .14, .09) -> weights ∝ 1/β (rounded;
@@ -306,8 +314,9 @@ def prosthetic_simulation(conditions=PROSTHETIC_CONDITIONS, *, w_user=(1.0, 1.0,
 # real recordings: HuG-MP
 
 
+@renamed_keywords(key="seed")
 def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
-                     gamma: float = 0.6, samples: int = 100, n_boot: int = 100, key=None,
+                     gamma: float = 0.6, samples: int = 100, n_boot: int = 100, seed=None,
                      level: float = 0.95, per_motion: bool = False, estimator: str = "algorithm1",
                      **options) -> dict:
     """IK weights of HuG-MP subjects per task (or per task × motion) with bootstrap intervals.
@@ -324,7 +333,7 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     - ``chain``: the 4-DoF chain (default ``pj.ShoulderElbowArm()``).
     - ``gamma``: the null-space ratio in [0, 1].
     - ``samples``: points per motion after time normalisation (≥ 2).
-    - ``n_boot``, ``key``, ``level``: as :func:`bootstrap_ik_weights`.
+    - ``n_boot``, ``seed``, ``level``: as :func:`bootstrap_ik_weights`.
     - ``per_motion``: weights per task × motion instead of per task.
     - ``estimator``: ``"algorithm1"`` (:func:`estimate_ik_weights`) or ``"lm"``
       (:func:`estimate_ik_weights_lm`).
@@ -390,7 +399,7 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     r = lambda a: a.reshape(shp + a.shape[4:])  # noqa: E731
     have = r(mk).any(-1).sum(-1) > 0  # items with at least one trial
     mkr = r(mk) & have[..., None, None]
-    res = bootstrap_ik_weights(r(qd), r(xd), r(J), mask=mkr, n_boot=n_boot, key=key, level=level,
+    res = bootstrap_ik_weights(r(qd), r(xd), r(J), mask=mkr, n_boot=n_boot, seed=seed, level=level,
                                estimator=estimator, gamma=gamma, fixed=fixed, **options)
     nan = lambda a: np.where(have[..., None], np.asarray(a), np.nan)  # noqa: E731
     st = np.asarray(res.status)
