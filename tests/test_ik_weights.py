@@ -699,6 +699,8 @@ def test_bootstrap_in_chunks_gives_the_replicates_of_one_call(monkeypatch, estim
     mask[2] = False
     kw = dict(n_boot=8, seed=jax.random.PRNGKey(2), gamma=0.6, estimator=estimator, mask=mask)
     one = fitting.bootstrap_ik_weights(q, x, J, **kw)
+    by_int = fitting.bootstrap_ik_weights(q, x, J, **{**kw, "seed": 2})  # an integer: PRNGKey of it
+    np.testing.assert_array_equal(np.asarray(by_int.lo), np.asarray(one.lo))
     per_rep = 8 * 3 * 6 * 5 * (1 * 3 + 1 + 3 + 1)  # items × trials × samples × (J, ẋ, q̇, mask) in bytes
     monkeypatch.setattr(analysis, "BOOTSTRAP_CHUNK_BYTES", 4 * per_rep)
     seen = []
