@@ -55,7 +55,11 @@ class MovementFit:
     damping per unit τ0 (trace n; the damping of a reach is ``τ0 W``); ``tau``, ``tau0`` (S,) [s]
     (``time_constants="seconds"``) or fractions of each reach's duration (``"fractions"``; ``tau``
     NaN for the time-base generator, whose duration fraction is ``duration``); ``delay`` (S,)
-    how long before each reach's window the target appeared (Arimoto; same unit); ``converged``,
+    how long before a reach's window the target appeared (Arimoto; same unit; unseen reaches are
+    predicted with it) and ``reach_delays`` {subject: (B,)} each fitted reach's own (``delay`` plus
+    its fitted offset, in the order of ``reaches[subject]``); ``reach_target_offsets`` {subject:
+    (B, m)} each fitted reach's target minus the hand at the end of its window (the chain's task
+    units; where the model says the reach was aimed); ``converged``,
     ``status`` (S,) (``pmpjax.Status``; ``messages``; ``INACCURATE`` when the fit met its tolerance but
     the integration error at the optimum stays above ``INTEGRATION_TOL_DEG``); ``params``, ``stderr`` (S, p), ``cov``
     (S, p, p) with ``param_names`` (zero variance along unidentified directions); ``unidentified``
@@ -78,6 +82,8 @@ class MovementFit:
     tau0: np.ndarray
     duration: np.ndarray
     delay: np.ndarray
+    reach_delays: dict
+    reach_target_offsets: dict
     converged: np.ndarray
     status: np.ndarray
     params: np.ndarray
@@ -187,6 +193,8 @@ def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
         out["hi"].append(s.q_obs.max((0, 1)) + margin)
     data = {k: np.stack(v) for k, v in out.items() if v and k != "target"}
     data["target"] = np.asarray(_fk(chain, data["q_end"]))
+    data["amplitude"] = np.maximum(np.linalg.norm(data["target"] - np.asarray(_fk(chain, data["q_start"])), axis=-1),
+                                   1e-9)
     return data
 
 
@@ -206,22 +214,41 @@ def _stage1(theta0, data, chain, max_steps, *, cfg):
     return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
-def _unidentified(J, n: int):
-    """Singular values (p,) of the trajectory residual's Jacobian ``J`` (N, p) on its data rows (the
-    last ``1 + n`` rows, the bounds' penalties, would make any direction "identified") and the
-    unidentified directions (p, p) as rows (zero rows for the identified ones)."""
-    J = J[: -(1 + n)]
-    J = jnp.where(jnp.isfinite(J), J, 0.0)
-    _, s, Vt = jnp.linalg.svd(J, full_matrices=False)
+def _unidentified(J, cfg, rows: int, B: int):
+    """Singular values (p,) of the trajectory residual's Jacobian ``J`` on its data rows (the first
+    ``B·rows``; the bounds' penalties and the offsets' prior would make any direction "identified")
+    and the unidentified directions (p, p) of the subject's ``p`` parameters as rows (zero rows for
+    the identified ones). The per-reach delay offsets are profiled out first: each reach's rows are
+    projected off its own offset column (a direction a reach's timing explains is not identified
+    by it); the subject's delay (the last parameter) is kept whole, identified as the offsets'
+    common part."""
+    p, k = mdl.n_params(cfg), mdl.n_nuisance(cfg)
+    Jd = J[: B * rows]
+    Jd = jnp.where(jnp.isfinite(Jd), Jd, 0.0)
+    G = Jd[:, :p].reshape(B, rows, p)
+    if J.shape[1] > p:
+        # each reach's own nuisance columns (B, rows, k), projected off its rows by least squares
+        C = Jd[:, p:].reshape(B, rows, B, k)[jnp.arange(B), :, jnp.arange(B)]
+        coef = jax.vmap(lambda c, g: jnp.linalg.lstsq(c, g, rcond=1e-10)[0])(C, G)  # (B, k, p)
+        if mdl.reach_delays(cfg):
+            # (not the subject's delay, the offsets' common part: identified as their mean by the prior)
+            coef = coef.at[:, :, p - 1].set(0.0)
+        G = G - jnp.einsum("brk,bkp->brp", C, coef)
+    _, s, Vt = jnp.linalg.svd(G.reshape(B * rows, p), full_matrices=False)
     keep = s > IDENTIFIABILITY_RCOND * s[0]
     return s, jnp.where(keep[:, None], 0.0, Vt)
 
 
+def _rows(dat, cfg) -> int:
+    return dat["q_obs"].shape[1] * cfg.n
+
+
 def _integration_error_one(th, dat, chain, cfg, steps, solver):
     """Largest joint difference [rad] of the used reaches between ``steps`` and ``2·steps``."""
-    p = mdl.unpack(th, cfg)
-    model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg)
-    q0, tg = dat["q_start"], dat["target"]
+    t, offsets, shift = mdl.split(th, cfg)
+    p = mdl.unpack(t, cfg)
+    model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg, offsets)
+    q0, tg = dat["q_start"], dat["target"] if shift is None else dat["target"] + shift
     a = mdl.simulate(chain, model, planner, q0, tg, steps, solver).q
     b = mdl.simulate(chain, model, planner, q0, tg, 2 * steps, solver).q
     return jnp.max(jnp.where((dat["weight"] > 0)[:, None, None], jnp.abs(a - b), 0.0))
@@ -234,7 +261,7 @@ def _identifiability(theta, data, chain, *, cfg, steps, solver):
 
     def one(th, dat):
         J = jax.jacfwd(lambda t: mdl.trajectory_residual(t, dat, chain, cfg, steps, solver))(th)
-        return _unidentified(J, cfg.n)
+        return _unidentified(J, cfg, _rows(dat, cfg), dat["weight"].shape[0])
 
     return jax.lax.map(lambda a: one(*a), (theta, data))
 
@@ -243,9 +270,11 @@ def _identifiability(theta, data, chain, *, cfg, steps, solver):
 def _stage2(theta0, data, chain, max_steps, *, cfg, steps, solver):
     def one(th0, dat):
         res = lambda th, d: mdl.trajectory_residual(th, d, chain, cfg, steps, solver)  # noqa: E731
-        r = least_squares(res, th0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
+        lin = lambda th, d: mdl.trajectory_linearise(th, d, chain, cfg, steps, solver)  # noqa: E731
+        r = least_squares(res, th0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol,
+                          linearise=lin if mdl.n_nuisance(cfg) else None)
         cov, _, _, _ = covariance(r)
-        sv, V0 = _unidentified(r.jac, cfg.n)
+        sv, V0 = _unidentified(r.jac, cfg, _rows(dat, cfg), dat["weight"].shape[0])
         err = _integration_error_one(r.x, dat, chain, cfg, steps, solver)
         return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status,
                     steps=r.steps, cov=cov, singular_values=sv, V0=V0, integration_error=err)
@@ -312,7 +341,8 @@ def fit_movements(
     cond_max = math.inf if stiffness_cond_max is None else float(stiffness_cond_max)
     if not cond_max > 1.0:
         raise ValueError(f"`stiffness_cond_max` must be > 1 (or None), got {stiffness_cond_max!r}")
-    cfg = mdl.Config(chain.n, model, damping, time_constants, cond_max=cond_max)
+    cfg = mdl.Config(chain.n, model, damping, time_constants, m=chain.m,
+                     cond_max=cond_max)
     joints = tuple(recordings[0].joint_names)
     by_subject = group_by_subject(recordings)
     found = {s: subject_reaches(s, recs, chain, dict(find_options or {})) for s, recs in by_subject.items()}
@@ -335,6 +365,7 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
     s1 = jax.device_get(_stage1(th1, data, chain, np.int32(ms[0]), cfg=cfg))
     theta0 = np.asarray(s1["start"])
     solver, steps = "rodas4", STEPS_PER_SAMPLE
+    B = data["weight"].shape[1]
     out = dict(stage1=s1, solver=solver, B=data["weight"].shape[1])
     lm2 = np.zeros(S, int)
     if ms[1] == 0:
@@ -344,7 +375,7 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
                    cov=np.full(theta0.shape + theta0.shape[-1:], np.nan), residual=None, steps=steps,
                    integration_error_deg=np.full(S, np.nan), lm2=lm2)
         return out
-    x = theta0
+    x = np.concatenate([theta0, np.zeros((S, B * mdl.n_nuisance(cfg)))], axis=1)
     for _ in range(4):
         s2 = jax.device_get(_stage2(x, data, chain, np.int32(ms[1]), cfg=cfg, steps=steps, solver=solver))
         lm2 = lm2 + s2["steps"]
@@ -392,16 +423,23 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
     lm = np.zeros((S_all, 2), int)
     sv, unident, V0 = nan(S_all, p), [()] * S_all, np.zeros((S_all, p, p))
     bound = np.zeros((S_all, 1 + n), bool)
+    reach_delay, target_shift = {}, {}
     for a, s in enumerate(names_all):
         if s not in idx:
             continue
         i = idx[s]
-        x = np.asarray(out["x"][i])
-        params[a], cov[a] = x, out["cov"][i]
+        x_all = np.asarray(out["x"][i])
+        x = x_all[:p]
+        params[a], cov[a] = x, np.asarray(out["cov"][i])[:p, :p]
+        k_nu = mdl.n_nuisance(cfg)
+        nuis = x_all[p:].reshape(-1, k_nu)[: len(usable[s])] if x_all.size > p else np.zeros((len(usable[s]), 0))
+        offsets = nuis[:, 0] if mdl.reach_delays(cfg) and nuis.shape[1] else np.zeros(0)
+        target_shift[s] = nuis[:, nuis.shape[1] - cfg.m:] if nuis.shape[1] else np.zeros((len(usable[s]), 0))
         pr = jax.device_get(mdl.unpack(jnp.asarray(x), cfg))
         KJ[a], W[a], q_rest[a] = pr["KJ"], pr["W"], pr["q_rest"]
         if cfg.model == "lambda0":
             tau[a], delay[a] = pr["a"], pr["delay"]
+            reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
         else:
             dur[a] = pr["a"]
         tau0[a] = pr["a0"]
@@ -419,8 +457,9 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
             r = r[: n_reach[a], : (SAMPLES - 1) * n]
             rmse[a] = np.rad2deg(np.sqrt(np.sum(r**2) / (n * n_reach[a])))
         sigma2 = 2 * cost / max(N, 1)
-        aic[a] = N * math.log(max(sigma2, 1e-300)) + 2 * p
-        bic[a] = N * math.log(max(sigma2, 1e-300)) + p * math.log(max(N, 1))
+        n_free = p + nuis.size  # the reaches' nuisance parameters count as parameters
+        aic[a] = N * math.log(max(sigma2, 1e-300)) + 2 * n_free
+        bic[a] = N * math.log(max(sigma2, 1e-300)) + n_free * math.log(max(N, 1))
         err[a] = out["integration_error_deg"][i]
         lm[a] = (int(out["stage1"]["steps"][i]), int(out["lm2"][i]))
         sv[a] = out["singular_values"][i]
@@ -436,6 +475,7 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
     stderr = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
     return MovementFit(
         subjects=names_all, KJ=KJ, q_rest=q_rest, W=W, tau=tau, tau0=tau0, duration=dur, delay=delay,
+        reach_delays=reach_delay, reach_target_offsets=target_shift,
         converged=status == int(Status.SUCCESSFUL), status=status, params=params, stderr=stderr, cov=cov,
         param_names=pnames, unidentified=tuple(unident), unidentified_directions=V0,
         singular_values=sv, loss=loss, rmse_deg=rmse, aic=aic,

@@ -76,6 +76,7 @@ def least_squares(
     xtol: float = 1e-12,
     stol: float | None = None,
     damping: float = 1e-3,
+    linearise=None,
 ) -> LeastSquaresResult:
     """Minimise ``½ |residual(x, args)|²`` over ``x`` by Levenberg–Marquardt (jit-able, vmappable).
 
@@ -86,6 +87,7 @@ def least_squares(
     ``√(2 stol)`` standard errors of the optimum (``stol = 1e-4``: 0.014), which is what a fit to
     noisy data can mean by converged, also where the residual is only piecewise smooth (thresholds,
     interpolation) and Levenberg–Marquardt would crawl. Non-finite trial residuals are rejected steps.
+    The Jacobian is forward-mode autodiff of ``residual`` unless ``linearise`` is given.
 
     **Arguments:**
 
@@ -96,6 +98,9 @@ def least_squares(
     - ``gtol``, ``ftol``, ``xtol``: the gradient, cost and step tolerances above (≥ 0).
     - ``stol``: the statistical tolerance above (None: off).
     - ``damping``: the initial Levenberg–Marquardt damping.
+    - ``linearise``: optional ``(x, args) -> (r (N,), J (N, p))`` in place of forward-mode autodiff of
+      ``residual`` (traced inside ``pmpjax.internal.forward_jacobians``), for Jacobians with known
+      structure, e.g. per-item nuisance parameters whose columns one JVP gives together.
 
     **Returns:**
 
@@ -103,12 +108,14 @@ def least_squares(
 
     **Raises:**
 
-    - ``TypeError`` for a non-callable ``residual``; ``ValueError`` naming the
+    - ``TypeError`` for a non-callable ``residual`` or ``linearise``; ``ValueError`` naming the
       argument for an ``x0`` that is not 1-D, negative or non-finite tolerances, or a residual that is
       not a 1-D vector.
     """
     if not callable(residual):
         raise TypeError(f"`residual` must be callable residual(x, args), got {type(residual).__name__}")
+    if linearise is not None and not callable(linearise):
+        raise TypeError(f"`linearise` must be callable linearise(x, args) -> (r, J), got {type(linearise).__name__}")
     warn_without_x64()
     x0 = to_jax(as_array("x0", x0), dtype=jnp.result_type(float))
     if x0.ndim != 1:
@@ -124,6 +131,8 @@ def least_squares(
         # One pass: the residual rides along as jacfwd's aux output (no second primal solve).
         # (simulate's JVP with the tangents folded into its batch: pmpjax.internal.forward_jacobians)
         with forward_jacobians():
+            if linearise is not None:
+                return linearise(x, args)
             J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
         return r, J
 
