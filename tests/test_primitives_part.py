@@ -77,20 +77,20 @@ def test_blended_equilibrium_balances_c_mujoco_gravity_and_springs(run):
     mixed = 0
     for r in table:
         alpha = np.array([float(r[f"alpha_{nm}"]) for nm in ("rest", "down", "up", "side")])
-        q_set = np.array([float(r[f"q_set_{j}"]) for j in range(6)])
-        q_eq = np.array([float(r[f"q_eq_{j}"]) for j in range(6)])
+        q_set = np.array([float(r[f"q_set_{j} [rad]"]) for j in range(1, 7)])
+        q_eq = np.array([float(r[f"q_eq_{j} [rad]"]) for j in range(1, 7)])
         want = alpha @ P if r["rule"] == "blend" else P[int(np.argmax(alpha))]
         np.testing.assert_allclose(q_set, want, atol=1e-9)
         g, hand = gravity(q_eq)
         assert np.abs(-arm.K * (q_eq - q_set) - g).max() < 1e-8
-        np.testing.assert_allclose([float(r[f"hand_eq_{c}"]) for c in "xyz"], hand, atol=1e-10)
+        np.testing.assert_allclose([float(r[f"hand_eq_{c} [m]"]) for c in "xyz"], hand, atol=1e-10)
         assert np.linalg.norm(q_eq - q_set) > 0.02  # gravity really sags the arm
         if r["rule"] == "blend" and np.count_nonzero(alpha) > 1:
             mixed += 1
             h = 1e-6
             H = np.stack([(gravity(q_eq + h * e)[0] - gravity(q_eq - h * e)[0]) / (2 * h) for e in np.eye(6)], 1)
             assert np.linalg.eigvalsh(np.diag(arm.K) + 0.5 * (H + H.T)).min() > 0
-        assert float(r["c_rollout_vs_equilibrium_rad"]) < 1e-4
+        assert float(r["c_rollout_vs_equilibrium [rad]"]) < 1e-4
     assert mixed == 3  # the three pairwise blends of the front primitives at the --quick grid
 
 

@@ -99,15 +99,15 @@ def _primitives(ctx) -> dict:
     for i in range(2 * n):
         a = alpha[i % n]
         rows.append({
-            "rule": "blend" if i < n else "winner-take-all",
+            "rule": "blend" if i < n else "winner-take-all", "status": int(status[i]),
             **{f"alpha_{nm}": float(a[j]) for j, nm in enumerate(PRIMITIVE_NAMES)},
-            **{f"q_set_{j}": f"{q_set[i, j]:.12g}" for j in range(arm.n)},  # full precision: re-checkable
-            **{f"q_eq_{j}": f"{q_eq[i, j]:.12g}" for j in range(arm.n)},
-            **{f"hand_set_{c}": float(hand_set[i, k]) for k, c in enumerate("xyz")},
-            **{f"hand_eq_{c}": f"{hand_eq[i, k]:.12g}" for k, c in enumerate("xyz")},
-            "sag_m": float(np.linalg.norm(hand_eq[i] - hand_set[i])),
-            "residual_Nm": float(residual[i]), "status": int(status[i]),
-            "c_rollout_vs_equilibrium_rad": float(settle[i]),
+            **{f"q_set_{j + 1} [rad]": f"{q_set[i, j]:.12g}" for j in range(arm.n)},  # full precision: re-checkable
+            **{f"q_eq_{j + 1} [rad]": f"{q_eq[i, j]:.12g}" for j in range(arm.n)},
+            **{f"hand_set_{c} [m]": float(hand_set[i, k]) for k, c in enumerate("xyz")},
+            **{f"hand_eq_{c} [m]": f"{hand_eq[i, k]:.12g}" for k, c in enumerate("xyz")},
+            "sag [m]": float(np.linalg.norm(hand_eq[i] - hand_set[i])),
+            "residual [Nm]": float(residual[i]),
+            "c_rollout_vs_equilibrium [rad]": float(settle[i]),
         })
     ctx.table(rows, "primitives_equilibria.csv",
               "Set-points (blends Σ α_i P_i of the down/up/side primitives, and winner-take-all of the same "
@@ -139,7 +139,7 @@ def _primitives(ctx) -> dict:
                "Williamson (1996) Figure 3 (shaded region spanned by the primitives) and Figure 5 (the four postures).")
     blends = slice(1, n)
     ctx.log(f"{n} activations: {int((status == 0).sum())}/{2 * n} equilibria converged; hand sag "
-            f"{min(r['sag_m'] for r in rows):.3f}..{max(r['sag_m'] for r in rows):.3f} m; C rollouts settle within "
+            f"{min(r['sag [m]'] for r in rows):.3f}..{max(r['sag [m]'] for r in rows):.3f} m; C rollouts settle within "
             f"{settle.max():.1e} rad of the equilibria")
 
     # --- Figure 2: convergent force field of the 'down' posture ---------------------------------
@@ -197,14 +197,14 @@ def _primitives(ctx) -> dict:
                    f"(dashed), with the {'touch sensor' if sensor != 'torque' else 'torque and its lead reference'}.",
                    paper)
     ctx.table([
-        {"scenario": "grasp", "event_s": float(t[k]), "quantity": "max |q_end - q_touched| [rad]", "value": hold},
-        {"scenario": "grasp", "event_s": float(t[k]), "quantity": "shoulder set-point above posture at end [rad]",
+        {"scenario": "grasp", "event [s]": float(t[k]), "quantity": "max |q_end - q_touched| [rad]", "value": hold},
+        {"scenario": "grasp", "event [s]": float(t[k]), "quantity": "shoulder set-point above posture at end [rad]",
          "value": gap},
-        {"scenario": "withdrawal", "event_s": TOUCH[0], "quantity": "max |set-point_end - rest| [rad]",
+        {"scenario": "withdrawal", "event [s]": TOUCH[0], "quantity": "max |set-point_end - rest| [rad]",
          "value": withdrawn},
-        {"scenario": "withdrawal", "event_s": TOUCH[0], "quantity": "set-point back at rest at [s]",
+        {"scenario": "withdrawal", "event [s]": TOUCH[0], "quantity": "set-point back at rest at [s]",
          "value": back_at_rest},
-        {"scenario": "lead", "event_s": PUSH[0], "value": lead_shift,
+        {"scenario": "lead", "event [s]": PUSH[0], "value": lead_shift,
          "quantity": f"shoulder set-point shift during a {PUSH_N:g} N lift [rad]"},
     ], "primitives_reflexes.csv", "Reflex outcomes on C MuJoCo: grasp holds the touched posture, withdrawal returns "
        "the set-point to rest (later targets suppressed), lead moves the set-point with the push.",
@@ -213,7 +213,7 @@ def _primitives(ctx) -> dict:
             f"({withdrawn:.1e} rad); lead moved the shoulder set-point by {lead_shift:+.3f} rad")
     return {
         "activations": n, "converged": int((status == 0).sum()), "equilibria": 2 * n,
-        "max_sag_m": max(r["sag_m"] for r in rows),
+        "max_sag_m": max(r["sag [m]"] for r in rows),
         "blend_region_hand_span_m": np.ptp(hand_eq[blends], axis=0).round(4).tolist(),
         "winner_take_all_distinct_postures": int(len(np.unique(np.round(q_wta, 12), axis=0))),
         "max_c_rollout_vs_equilibrium_rad": float(settle.max()), "max_final_speed_rad_s": float(speed),
