@@ -50,16 +50,18 @@ def test_fit_donders_command_on_the_shipped_example(tmp_path, monkeypatch):
     assert cli.main(["fit-donders", example("donders_example.csv"), "--out", str(tmp_path), "--starts", "3"]) == 1
     assert calls == [3]
     rows = read_rows(tmp_path / "donders_fit.csv")
+    # the columns of every command: what was fitted, its status, converged, then values with units
+    assert list(rows[0])[:3] == ["subject", "status", "converged"]
     assert [r["subject"] for r in rows] == ["subj1", "subj2"]
     assert [r["converged"] for r in rows] == ["True", "False"]
     assert rows[1]["status"] == pj.status_message(int(pj.Status.MAX_STEPS))
     for i, r in enumerate(rows):
         for a in range(3):
             for b in range(3):
-                assert float(r[f"KJ_{min(a, b)}{max(a, b)}"]) == pytest.approx(KJ[i][a, b], rel=1e-5, abs=1e-9)
-        q = np.deg2rad([float(r[f"q_rest_{j}_deg"]) for j in ("ps", "fe", "rud")])
+                assert float(r[f"KJ_{min(a, b)}{max(a, b)} [Nm/rad]"]) == pytest.approx(KJ[i][a, b], rel=1e-5, abs=1e-9)
+        q = np.deg2rad([float(r[f"q_rest_{j} [deg]"]) for j in ("ps", "fe", "rud")])
         np.testing.assert_allclose(q, q_rest[i], rtol=1e-3, atol=1e-6)
-        assert int(r["samples"]) == 80 and 0.15 < float(r["rms_torsion_deg"]) < 0.6
+        assert int(r["samples"]) == 80 and 0.15 < float(r["rms_torsion [deg]"]) < 0.6
     report = json.loads((tmp_path / "donders_fit.json").read_text())
     np.testing.assert_allclose(report["KJ"], KJ[:2])
     np.testing.assert_allclose(report["q_rest"], q_rest[:2])
@@ -84,9 +86,10 @@ def test_ik_weights_command_recovers_the_weights_of_the_example(tmp_path):
     assert cli.main(["ik-weights", example("ik_example.csv"), "--method", "lm", "--gamma", "0",
                       "--out", str(tmp_path)]) == 0
     rows = read_rows(tmp_path / "ik_weights.csv")
-    w = np.array([[float(r[f"w_{j}"]) for j in (1, 2, 3)] for r in rows])
+    assert list(rows[0])[:3] == ["item", "status", "converged"]
+    w = np.array([[float(r[f"w{j}"]) for j in (1, 2, 3)] for r in rows])
     np.testing.assert_allclose(w, [[1.0, 0.5, 0.2], [0.3, 1.0, 0.6]], atol=1e-5)
-    beta = np.array([[float(r[f"beta_{j}"]) for j in (1, 2, 3)] for r in rows])
+    beta = np.array([[float(r[f"beta{j}"]) for j in (1, 2, 3)] for r in rows])
     np.testing.assert_allclose(beta[0], (1 / w[0]) / np.sum(1 / w[0]), atol=1e-5)  # β_i = w_i⁻¹ / Σ w⁻¹
 
 

@@ -57,8 +57,9 @@ def test_main_job_part_and_command(tmp_path):
     np.testing.assert_allclose([float(r["A_net"]) for r in cmd_rows], [float(r["A_net"]) for r in rows], rtol=1e-5)
     # the command's time constants, against the generating values as the part's
     tcs = list(csv.DictReader((cmd_out / "time_constants.csv").open()))
-    np.testing.assert_allclose([float(r["tau0_s"]) for r in tcs], tau0_true, rtol=0.2)
-    assert np.all(np.abs(np.log(np.array([float(r["tau_s"]) for r in tcs]) / tau_true)) < np.log(2.0))
+    assert list(tcs[0])[:5] == ["subject", "status", "converged", "tau0 [s]", "tau [s]"]
+    np.testing.assert_allclose([float(r["tau0 [s]"]) for r in tcs], tau0_true, rtol=0.2)
+    assert np.all(np.abs(np.log(np.array([float(r["tau [s]"]) for r in tcs]) / tau_true)) < np.log(2.0))
     bad = tmp_path / "bad.csv"
     lines = pointing.read_text().splitlines()
     k = next(i for i, ln in enumerate(lines) if ln and not ln.startswith("#") and "subject" not in ln)

@@ -52,10 +52,10 @@ def _fit_donders(args) -> int:
     for i, s in enumerate(rec.subjects):
         K, q = np.asarray(fit.KJ[i]), np.asarray(fit.q_rest[i])
         rows.append({
-            "subject": s, "converged": bool(fit.converged[i]), "status": pj.status_message(int(fit.status[i])),
-            **{f"KJ_{a}{b}": f"{K[a, b]:.6g}" for a in range(3) for b in range(a, 3)},
-            **{f"q_rest_{j}_deg": f"{np.rad2deg(q[k]):.4g}" for k, j in enumerate(("ps", "fe", "rud"))},
-            "rms_torsion_deg": f"{np.rad2deg(float(fit.rms[i])):.4g}",
+            "subject": s, "status": pj.status_message(int(fit.status[i])), "converged": bool(fit.converged[i]),
+            **{f"KJ_{a}{b} [Nm/rad]": f"{K[a, b]:.6g}" for a in range(3) for b in range(a, 3)},
+            **{f"q_rest_{j} [deg]": f"{np.rad2deg(q[k]):.4g}" for k, j in enumerate(("ps", "fe", "rud"))},
+            "rms_torsion [deg]": f"{np.rad2deg(float(fit.rms[i])):.4g}",
             "samples": int(np.asarray(rec.mask[i]).sum()),
         })
     write_csv(out / "donders_fit.csv", rows)
@@ -106,8 +106,8 @@ def _ik_weights(args) -> int:
     w = np.asarray(res.w)
     beta = np.asarray(contribution_coefficients(np.where(np.isfinite(w), w, 1.0)))
     rows = [{"item": lab, "status": pj.status_message(int(status[i])), "converged": bool(res.converged[i]),
-             **{f"w_{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
-             **{f"beta_{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
+             **{f"w{j + 1}": f"{w[i, j]:.6g}" for j in range(w.shape[1])},
+             **{f"beta{j + 1}": f"{beta[i, j]:.6g}" for j in range(w.shape[1])},
              "error": f"{float(error[i]):.4g}"} for i, lab in enumerate(d["labels"])]
     write_csv(out / "ik_weights.csv", rows)
     n_ok = int(np.asarray(res.converged).sum())
@@ -179,8 +179,9 @@ def _analyze_pointing(args) -> int:
         fit, order, heuristic, tc, pred = fit_pointing_models(an, don, n_starts=args.starts)
         text += "\n\nτ = τ0 = T/5:\n" + heuristic.table() + "\n\nfitted τ0, τ:\n" + pred.table()
         write_csv(out / "time_constants.csv", [
-            {"subject": s, "donders_status": pj.status_message(int(fit.status[order[i]])),
-             "tau0_s": f"{tc.tau0[i]:.6g}", "tau_s": f"{tc.tau[i]:.6g}", "status": pj.status_message(int(tc.status[i])),
+            {"subject": s, "status": pj.status_message(int(tc.status[i])), "converged": bool(tc.converged[i]),
+             "tau0 [s]": f"{tc.tau0[i]:.6g}", "tau [s]": f"{tc.tau[i]:.6g}",
+             "donders_status": pj.status_message(int(fit.status[order[i]])),
              "captured_T5": int(heuristic.n_captured[i]), "captured_fitted": int(pred.n_captured[i])}
             for i, s in enumerate(an.subjects)])
     write_csv(out / "pointing_statistics.csv",
