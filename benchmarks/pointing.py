@@ -50,8 +50,8 @@ with the benchmark itself at the end; ``--repeats 5``)::
           10        10.8     0.36       36.1       47       45   1.06      1.00             3.22e-05
          100        14.4     3.19       31.9       54       34   1.56      1.00             3.22e-05
 
-The ≥ 100× target is not met against this baseline: 47× at 10 subjects and 54× at 100 (the run
-before, 00:43–00:48 UTC: 44× and 62×), with the fits agreeing with SciPy's to 3e-5. In CPU time,
+The ≥ 100× target is not met against this baseline: 47× at 10 subjects and 54× at 100 (44× and 62× in a
+run minutes earlier: the ratio moves with the machine's load), with the fits agreeing with SciPy's to 3e-5. In CPU time,
 core for core, 45× and 34×: the SciPy loop runs on one thread, while ``fit_time_constants`` keeps
 1.06 cores busy at 10 subjects and 1.56 at 100 (2 threads, XLA's CPU client). Per call:
 kinematics 1.5 µs closed form against 3.5 µs, the field 12.4 µs against 16.8 µs; ẋ on the
