@@ -29,7 +29,7 @@
 Usage: ``python benchmarks/pointing.py [--sizes 1 10 100] [--scipy-budget 120] [--trials 10]
 [--repeats 3] [--quick]``; writes ``results/pointing.json``.
 
-Latest figures (2026-12-05, the run of 00:52–00:56 UTC on the 6th; 2-core AMD EPYC (Zen 4)
+Latest figures (2026-12-06 00:52–00:56 UTC, ``results/pointing.json``; 2-core AMD EPYC (Zen 4)
 KVM, no GPU, Python 3.11, JAX 0.10.2; load average 0.6 at the start, 1.3
 with the benchmark itself at the end; ``--repeats 5``)::
 

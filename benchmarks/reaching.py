@@ -45,9 +45,9 @@ nothing. Usage: ``python benchmarks/reaching.py [--quick] [--subjects 1 ...] [--
 [--scipy-nfev 3] [--max-steps 100 100] [--table [--variants ...] [--name NAME]]``; the fit cost
 writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
-Latest figures (2026-12-05, 2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
+Latest figures (2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
 
-Fit cost (the run of 00:39–00:43 UTC on the 6th; load average 0.6 at the start, 2.0 with the
+Fit cost (2026-12-06 00:39–00:43 UTC, ``results/reaching.json``; load average 0.6 at the start, 2.0 with the
 benchmark itself at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
 ``--rounds 3``)::
 
