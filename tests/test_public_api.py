@@ -213,7 +213,8 @@ def test_families_import_each_other_only_through_their_faces():
     """A module of one family of ``pmpjax`` or ``fitting`` (or of the application) imports another
     family through its ``__init__.py`` only, never one of its modules."""
     found = _private_family_imports("pmpjax") + _private_family_imports("fitting")
-    assert not found, f"imports of another family's private module: {found}"
+    assert not found, (f"imports of another family's private module (import the name from the family's face, "
+                       f"adding it to that __init__.py if it is not there yet): {found}")
 
 
 def test_benchmarks_use_public_and_internal_names_only():
