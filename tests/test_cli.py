@@ -197,6 +197,31 @@ def test_a_running_part_shows_its_loops_items_done_of_the_total():
         ui.close()
 
 
+def test_a_library_calls_progress_callback_shows_its_items_done_of_the_total(tmp_path):
+    """``ctx.counter()``: a callback ``advance(done, total)`` for a loop the part does not drive
+    (``fitting.sweep``'s ``progress``), shown as the part's own loops are: here through a worker's
+    queue, each count as it is reached, and the row ended at the total."""
+    import types
+
+    from pmpjax._app.parts import PartContext
+    from pmpjax._app.workers import _queue_progress
+
+    sent = []
+    queue = types.SimpleNamespace(put=sent.append)
+    ctx = PartContext("sweeps", tmp_path, quick=True, seed=0, console=None,
+                      progress_factory=_queue_progress(queue, "sweeps"))
+    advance = ctx.counter(description="curvature map rows")
+    counts = lambda: [m[4:6] for m in sent if m[0] == "progress"]  # noqa: E731
+    advance(0, 24)
+    assert counts()[-1] == (0, 24) and "curvature map rows" in sent[0][3]
+    advance(10, 24)
+    assert counts()[-1] == (10, 24)
+    advance(20, 24)
+    assert counts()[-1] == (20, 24) and sent[-1][0] == "progress"
+    advance(24, 24)
+    assert counts()[-1] == (24, 24) and sent[-1][0] == "progress_end"
+
+
 def test_log_lines_are_not_wrapped_when_the_output_is_not_a_terminal(capsys):
     """Written to a file or a pipe (a job's log), a long message stays one line."""
     ui = Display(False)

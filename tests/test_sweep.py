@@ -238,6 +238,22 @@ def test_progress_bar_honours_progress_flag(capsys):
     assert "24/24" in capsys.readouterr().err
 
 
+def test_progress_as_a_function_gets_the_rows_done_of_all(capsys, tmp_path):
+    """``progress=f``: ``f(done, total)`` before the first chunk and after each (24 rows in chunks
+    of 10: 0, 10, 20, 24); a restart counts the chunks already stored as done. No bar is drawn."""
+    calls = []
+    record = lambda done, total: calls.append((done, total))  # noqa: E731
+    fitting.sweep(tiny, PARAMS, chunk_size=10, out=tmp_path / "s", progress=record)
+    assert calls == [(0, 24), (10, 24), (20, 24), (24, 24)] and capsys.readouterr().err == ""
+    (shard,) = (tmp_path / "s" / "chunks").glob("000002-*.npz")  # the last chunk, to compute again
+    shard.unlink()
+    calls.clear()
+    fitting.sweep(tiny, PARAMS, chunk_size=10, out=tmp_path / "s", progress=record)
+    assert calls == [(20, 24), (24, 24)]
+    with pytest.raises(TypeError, match="`progress`"):
+        fitting.sweep(tiny, PARAMS, chunk_size=10, progress="yes")
+
+
 def test_grid_is_the_cartesian_product():
     g = fitting.grid(x=[1.0, 2.0], y=[10.0, 20.0, 30.0], z=[0.5])
     rows = list(itertools.product([1.0, 2.0], [10.0, 20.0, 30.0], [0.5]))

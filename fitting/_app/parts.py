@@ -120,7 +120,7 @@ def _sweeps_in(ctx, store: Path) -> dict:
     anisotropy = np.array([0.5, 1.0, 2.0]) if ctx.quick else np.array([0.5, 0.75, 1.0, 4 / 3, 2.0, 3.0])
     rest_ps = np.linspace(-15.0, 15.0, 3 if ctx.quick else 7)
     cmap = sweep(functools.partial(curvature_row, dt=0.005), grid(anisotropy=anisotropy, rest_ps_deg=rest_ps),
-                 chunk_size=16, out=store / "curvature", progress=False)
+                 chunk_size=16, out=store / "curvature", progress=ctx.counter(description="curvature map rows"))
     a_net = cmap.outputs["A_net"].reshape(len(anisotropy), len(rest_ps), 8)
     fig = plot_curvature_map(anisotropy, rest_ps, a_net)
     ctx.figure(fig, "curvature_map.png",
@@ -137,7 +137,7 @@ def _sweeps_in(ctx, store: Path) -> dict:
               "n_postures": g["n_postures"], "noise_deg": np.full(len(s), 0.5),
               "seed": 1000 * s + 10 * g["rep"] + g["n_postures"]}
     power = sweep(functools.partial(donders_power_row, n_max=n_max), params, chunk_size=16,
-                  out=store / "donders_power", progress=False)
+                  out=store / "donders_power", progress=ctx.counter(description="Donders power rows"))
     err = power.outputs["KJ_error"].reshape(len(names), len(n_values), reps)
     ok = ~power.failed.reshape(err.shape)
     rms = np.sqrt(np.nanmean(np.where(ok, err, np.nan) ** 2, axis=(0, 2)))

@@ -251,7 +251,7 @@ def sweep(
     out=None,
     devices=None,
     client=None,
-    progress: bool = True,
+    progress=True,
 ) -> SweepResult:
     """Evaluate ``fn`` on every parameter row, in chunks, resumably; equals ``jax.vmap(fn)(params)``.
 
@@ -271,7 +271,8 @@ def sweep(
       rows are split across them.
     - ``client``: a ``dask.distributed.Client``: run the chunks as Dask tasks on its workers
       (``fn`` must pickle with cloudpickle; pip install 'pmpjax[dask]'). Excludes ``devices``.
-    - ``progress``: show a progress bar (rich) of the rows done.
+    - ``progress``: show a progress bar (rich) of the rows done; or a function ``progress(done,
+      total)`` called with the rows done of all rows after each chunk (and once before the first).
 
     Each chunk runs ``jit(vmap(fn))`` compiled with ``pmpjax.internal.FAST_COMPILE`` (XLA:CPU's
     legacy loop emitters: rows that fit or simulate compile 15–55 % faster, pmpjax/_base/compile.py).
@@ -291,8 +292,8 @@ def sweep(
         raise TypeError(f"`fn` must be callable, got {type(fn).__name__}")
     numeric, labels, n = _check_params(params)
     check_positive_int("chunk_size", chunk_size)
-    if not isinstance(progress, bool):
-        raise TypeError(f"`progress` must be True or False, got {progress!r}")
+    if not isinstance(progress, bool) and not callable(progress):
+        raise TypeError(f"`progress` must be True, False or a function progress(done, total), got {progress!r}")
     if client is not None:
         if devices is not None:
             raise ValueError("pass either `devices` (local run) or `client` (Dask), not both")
@@ -350,8 +351,12 @@ def sweep(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     bar = Progress("sweep rows", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                   disable=not progress, transient=False, console=Console(stderr=True))
-    task = bar.add_task("sweep", total=n, completed=sum(min(chunk_rows, n - k * chunk_rows) for k in reused))
+                   disable=progress is not True, transient=False, console=Console(stderr=True))
+    rows_done = [sum(min(chunk_rows, n - k * chunk_rows) for k in reused)]
+    task = bar.add_task("sweep", total=n, completed=rows_done[0])
+    report = progress if callable(progress) else None
+    if report is not None:
+        report(rows_done[0], n)
     bar.start()
 
     def done(k, arrays):
@@ -362,6 +367,9 @@ def sweep(
         for r, a in zip(results, arrays):
             r[k * chunk_rows: k * chunk_rows + rows] = a
         bar.advance(task, rows)
+        rows_done[0] += rows
+        if report is not None:
+            report(rows_done[0], n)
 
     try:
         if todo:

@@ -97,7 +97,8 @@ class Artefact:
 
 class PartContext:
     """What a part gets: ``out`` folder, ``quick`` (small sizes), ``seed``, ``log(msg)``,
-    ``progress(iterable, total=None, description=...)`` and ``figure``/``table`` recorders."""
+    ``progress(iterable, total=None, description=...)``, ``counter(description=...)`` (a
+    progress callback) and ``figure``/``table`` recorders."""
 
     def __init__(self, name: str, out: Path, *, quick: bool, seed: int, console, progress_factory):
         self.name, self.out, self.quick, self.seed = name, out, quick, seed
@@ -112,6 +113,26 @@ class PartContext:
 
     def progress(self, iterable: Iterable, *, total: int | None = None, description: str = ""):
         return self._progress_factory(iterable, total=total, description=f"{self.name}: {description}")
+
+    def counter(self, *, description: str = ""):
+        """A function ``advance(done, total)`` that shows ``done`` of ``total`` items of a loop the
+        part does not drive itself (a library call's progress callback, e.g. ``fitting.sweep``'s
+        ``progress``), on the same display as :meth:`progress`."""
+        state: dict = {}
+
+        def advance(done: int, total: int) -> None:
+            if "items" not in state:
+                state.update(items=iter(self.progress(range(total), total=total, description=description)), shown=0)
+            items = state["items"]
+            if done >= total:
+                for _ in items:  # (the loop's end: its row is removed)
+                    pass
+                return
+            while state["shown"] < int(done) + 1:  # (a loop counts an item when the next one is taken)
+                next(items, None)
+                state["shown"] += 1
+
+        return advance
 
     def figure(self, fig, filename: str, caption: str, paper: str = "", *, dpi: int = 110) -> Path:
         """Save a matplotlib figure (or record an existing PNG path) as ``filename``."""
