@@ -57,7 +57,6 @@ def test_fit_converges_and_recovers_the_time_constants(case):
     KJ, fit, _, _ = case
     assert fit.converged.tolist() == [True] and fit.n_reaches[0] == 20
     se = dict(zip(fit.param_names, fit.stderr[0]))
-    print("tau, tau0 relative errors", fit.tau[0] / TAU - 1, fit.tau0[0] / TAU0 - 1, se)
     assert abs(fit.tau[0] / TAU - 1) < 0.05 and abs(fit.tau0[0] / TAU0 - 1) < 0.05, (fit.tau, fit.tau0, se)
     assert fit.integration_error_deg[0] <= 0.01
 

@@ -63,7 +63,8 @@ def case(tmp_path_factory):
 
     code = main(["fit-movements", "--chain", str(ARM5), "--site", "hand", str(paths[0]),
                  "--holdout", str(paths[1]), "--out", str(out)])
-    return dict(KJ=KJ, fk=fk, jac=jac, chain=chain, paths=paths, info=infos[1], out=out, code=code)
+    return dict(KJ=KJ, fk=fk, jac=jac, chain=chain, paths=paths, info=infos[1], train_info=infos[0], out=out,
+                code=code)
 
 
 def rows(path):
@@ -76,7 +77,6 @@ def test_command_fits_the_time_constants_and_predicts_held_out_reaches(case):
     assert case["code"] == 0
     (fit,) = rows(out / "movement_fit.csv")
     assert fit["converged"] == "True" and int(fit["reaches"]) == 8
-    print("tau0, tau", float(fit["tau0 [s]"]) / TAU0 - 1, float(fit["tau [s]"]) / TAU - 1)
     assert abs(float(fit["tau0 [s]"]) / TAU0 - 1) < 0.05 and abs(float(fit["tau [s]"]) / TAU - 1) < 0.05, fit
     assert float(fit["integration_error [deg]"]) <= 0.01
     summary = rows(out / "movement_prediction_summary.csv")[-1]
@@ -86,6 +86,10 @@ def test_command_fits_the_time_constants_and_predicts_held_out_reaches(case):
     assert len(per_reach) == int(summary["reaches"]) == 6 and all(r["recording"] == "P1_trial3" for r in per_reach)
     for name in ("movement_parameters.csv", "reaches.csv", "movements_P1.png", "movement_parameters.png"):
         assert (out / name).stat().st_size > 0, name
+    # each fitted reach's target onset against the reference's switch times (never given to the fit)
+    onsets = np.array([float(r["target_onset [s]"]) for r in rows(out / "reaches.csv") if r["used"] == "fitted"])
+    err_ms = 1e3 * np.abs(onsets - case["train_info"]["t_switch"])
+    assert len(onsets) == 8 and np.median(err_ms) < 8 and err_ms.max() < 25, err_ms
     result = json.loads((out / "movement_fit.json").read_text())
     assert result["joint_names"] == list(case["chain"].joint_names)
 

@@ -98,13 +98,23 @@ def _fit_movements(args) -> int:
     write_csv(out / "movement_parameters.csv", fit.parameter_rows())
     reach_rows = []
     for s, found in fit.reaches.items():
+        delays = fit.reach_delays.get(s)
+        shifts = fit.reach_target_offsets.get(s)
         for k in range(len(found)):
+            # the fitted target onset in the recording's clock, and how far the fitted target lies
+            # beyond where the hand came to rest (the chain's length unit)
+            d = float(delays[k]) * (1.0 if fit.time_constants == "seconds" else float(found.duration[k])) \
+                if delays is not None else float("nan")
+            shift = float(np.linalg.norm(shifts[k])) if shifts is not None and shifts.shape[1] else float("nan")
             reach_rows.append({"subject": s, "recording": found.recording[k],
                                "t_start [s]": round(float(found.t[k, 0]), 4),
-                               "t_end [s]": round(float(found.t[k, -1]), 4), "used": "fitted", "reason": ""})
+                               "t_end [s]": round(float(found.t[k, -1]), 4), "used": "fitted", "reason": "",
+                               "target_onset [s]": round(float(found.t[k, 0]) - d, 4),
+                               "target_shift [length]": shift})
         for rec, a, b, why in fit.skipped[s]:
             reach_rows.append({"subject": s, "recording": rec, "t_start [s]": round(float(a), 4),
-                               "t_end [s]": round(float(b), 4), "used": "skipped", "reason": why})
+                               "t_end [s]": round(float(b), 4), "used": "skipped", "reason": why,
+                               "target_onset [s]": float("nan"), "target_shift [length]": float("nan")})
     if reach_rows:
         write_csv(out / "reaches.csv", reach_rows)
     result = {
