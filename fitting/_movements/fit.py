@@ -9,12 +9,14 @@ rows) is decomposed; its right singular vectors with singular values below
 ``IDENTIFIABILITY_RCOND`` of the largest are directions the data cannot determine (on the HuG-MP
 arm: shifting ``q_rest`` along ``KJ⁻¹ e_elbow``, which no movement and no final posture sees).
 Stage 2 does not move along them (the residual's gradient there is zero, so Levenberg–Marquardt's
-steps have no component there to first order, and the rest-angle bounds hold them in the recorded
-range): their values are a gauge, not an estimate, reported by parameter name (``unidentified``,
+steps have no component there to first order, and the rest-angle bounds hold them within a quarter
+turn of the recorded range): their values are a gauge, not an estimate, reported by parameter name (``unidentified``,
 ``unidentified_directions``). (Projecting stage 2 onto the identified directions of the stage-1
 optimum was measured to bias τ by 13–30 % on the shoulder–elbow arm: the directions turn with
-``KJ``.) Stage 2 fits every parameter
-to the joint trajectories through ``pmpjax.simulate`` (RODAS4, forward-mode derivatives); the
+``KJ``.) Stage 2 fits every parameter, and each reach's delay and target offsets (nuisance
+parameters with weak priors, ``fitting._movements.model``; profiled out of the identifiability
+analysis), to the joint trajectories through ``pmpjax.simulate`` (RODAS4, forward-mode
+derivatives, the nuisance columns ``k`` JVPs for all reaches together); the
 integration error at the optimum (against twice the steps) is checked and the step count doubled
 while it exceeds ``INTEGRATION_TOL_DEG``. Converged means Levenberg–Marquardt met a tolerance
 (relative cost change 1e-8, or every parameter within 0.014 standard errors of the optimum).
