@@ -69,7 +69,8 @@ class MovementFit:
     ``unidentified_directions`` (S, p, p) the unit directions as rows (zero rows for the others);
     ``singular_values`` (S, p) of the trajectory Jacobian (data rows) at the optimum; ``loss`` (S,)
     ½ Σ r²; ``rmse_deg`` (S,) training joint RMSE; ``aic``, ``bic`` (S,); ``n_reaches``,
-    ``n_residuals`` (S,); ``lm_steps`` (S, 2); ``solver``, ``steps_per_sample``,
+    ``n_residuals`` (S,); ``lm_steps`` (S, 2); ``solver``, ``steps_per_sample`` (the largest used: a subject is fitted
+    again at twice the steps while its integration error at the optimum exceeds the tolerance),
     ``integration_error_deg`` (S,) (largest joint difference against twice the steps);
     ``bound_active`` (S, 1 + n) (cond(KJ), each rest angle); ``reaches`` {subject:
     SubjectReaches} the windows fitted; ``skipped`` {subject: [(recording, t_from, t_to, reason)]};
@@ -378,18 +379,29 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
                    integration_error_deg=np.full(S, np.nan), lm2=lm2)
         return out
     x = np.concatenate([theta0, np.zeros((S, B * mdl.n_nuisance(cfg)))], axis=1)
-    for _ in range(4):
-        s2 = jax.device_get(_stage2(x, data, chain, np.int32(ms[1]), cfg=cfg, steps=steps, solver=solver))
-        lm2 = lm2 + s2["steps"]
-        err = np.rad2deg(np.asarray(s2["integration_error"]))
-        finite = np.all(np.isfinite(s2["x"]), axis=-1)
-        if np.all(~finite | (err <= INTEGRATION_TOL_DEG)) or steps >= MAX_STEPS_PER_SAMPLE:
-            break
-        x = np.where(finite[:, None], s2["x"], x)
+    run = lambda x, d, st: {k: np.array(v) for k, v in jax.device_get(  # noqa: E731
+        _stage2(x, d, chain, np.int32(ms[1]), cfg=cfg, steps=st, solver=solver)).items()}
+    s2 = run(x, data, steps)
+    lm2 = lm2 + s2["steps"]
+    err = np.rad2deg(s2["integration_error"])
+    used = np.full(S, steps)
+    # Only the subjects whose integration error at the optimum is above the tolerance are fitted
+    # again, from their optimum, at twice the steps.
+    redo = np.all(np.isfinite(s2["x"]), axis=-1) & (err > INTEGRATION_TOL_DEG)
+    while np.any(redo) and steps < MAX_STEPS_PER_SAMPLE:
         steps *= 2
+        idx = np.flatnonzero(redo)
+        r = run(s2["x"][idx], {k: v[idx] for k, v in data.items()}, steps)
+        for k, v in r.items():
+            s2[k][idx] = v if k != "steps" else s2[k][idx] + v
+        lm2[idx] += r["steps"]
+        err[idx] = np.rad2deg(r["integration_error"])
+        used[idx] = steps
+        redo = np.zeros(S, bool)
+        redo[idx] = np.all(np.isfinite(r["x"]), axis=-1) & (err[idx] > INTEGRATION_TOL_DEG)
     out.update(singular_values=s2["singular_values"], V0=s2["V0"])
     out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], cov=s2["cov"],
-               residual=s2["residual"], steps=steps, integration_error_deg=err, lm2=lm2)
+               residual=s2["residual"], steps=int(used.max()), integration_error_deg=err, lm2=lm2)
     bad = err > INTEGRATION_TOL_DEG
     if np.any(bad):
         warnings.warn(f"fit_movements: the integration error at the optimum stays above {INTEGRATION_TOL_DEG}° "
