@@ -8,7 +8,10 @@ import pytest
 from _layout import checking_part_figures
 from scipy import stats
 
+import pmpjax as pj
 from pmpjax._app import cli
+
+S = pj.Status
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +69,13 @@ def test_ik_parts_report_the_papers_quantities(run):
     assert syn["hotelling_p"] == pytest.approx(stats.f.sf(f, p, N - p), rel=1e-6)
     np.testing.assert_allclose(syn["w_mean"], w_syn.mean(0), atol=1e-12)
     hug = res["ik_hugmp"]["results"]
+    # The part reports the estimator that converges on these recordings (least squares on Eq 16),
+    # with Algorithm 1's statuses beside it: it converges on none (the caption says why).
+    st, st1 = np.array(hug["status"]), np.array(hug["algorithm1_status"])
+    assert hug["estimator"] == "estimate_ik_weights_lm" and st.shape == st1.shape == (2, 6)
+    assert hug["converged"] == [int((st == 0).sum()), 12] and hug["converged"][0] >= 4
+    assert hug["algorithm1_converged"] == [0, 12] and np.all(np.isin(st1, [S.STALLED, S.MAX_STEPS]))
+    assert res["ik_hugmp"]["status"] == "ok"
     w, lo, hi = (np.array(hug[k]) for k in ("w", "lo", "hi"))
     finite = np.isfinite(w) & np.isfinite(lo) & np.isfinite(hi)
     assert finite.any() and np.all(lo[finite] <= hi[finite] + 1e-12)

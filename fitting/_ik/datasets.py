@@ -336,7 +336,8 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
     - ``n_boot``, ``seed``, ``level``: as :func:`bootstrap_ik_weights`.
     - ``per_motion``: weights per task × motion instead of per task.
     - ``estimator``: ``"algorithm1"`` (:func:`estimate_ik_weights`) or ``"lm"``
-      (:func:`estimate_ik_weights_lm`).
+      (:func:`estimate_ik_weights_lm`; the result then also holds ``algorithm1_status``, the status
+      of Algorithm 1's point estimate on the same data, with its default options).
     - ``options``: passed on to the estimator.
 
     **Returns:**
@@ -403,6 +404,14 @@ def hugmp_ik_weights(subjects=(1, 2, 3, 4), *, directory=None, chain=None,
                                estimator=estimator, gamma=gamma, fixed=fixed, **options)
     nan = lambda a: np.where(have[..., None], np.asarray(a), np.nan)  # noqa: E731
     st = np.asarray(res.status)
-    return dict(w=nan(res.w), lo=nan(res.lo), hi=nan(res.hi), status=np.asarray(res.w_status),
-                converged=(st == pj.Status.SUCCESSFUL).mean(0), stalled=(st == pj.Status.STALLED).mean(0),
-                subjects=names, fixed=fixed, skipped=skipped, notes=notes, failed=failed)
+    out = dict(w=nan(res.w), lo=nan(res.lo), hi=nan(res.hi), status=np.asarray(res.w_status),
+               converged=(st == pj.Status.SUCCESSFUL).mean(0), stalled=(st == pj.Status.STALLED).mean(0),
+               subjects=names, fixed=fixed, skipped=skipped, notes=notes, failed=failed)
+    if estimator == "lm":  # Algorithm 1 on the same data, beside (its point estimate only)
+        from .weights import estimate_ik_weights
+
+        flat = lambda a: r(a).reshape(shp[:-1] + (-1,) + a.shape[5:])  # noqa: E731 (trials × samples)
+        a1 = estimate_ik_weights(flat(qd), flat(xd), flat(J), gamma, mask=mkr.reshape(shp[:-1] + (-1,)),
+                                 fixed=fixed, on_invalid="flag")
+        out["algorithm1_status"] = np.asarray(a1.status)
+    return out
