@@ -113,3 +113,16 @@ def test_donders_plot():
     r = rng.normal(0.0, 0.1, (60, 3)) * [0.1, 1, 1]
     ax = pj.plot_donders(r, [np.array([0.0, 0.0, 0.0, 0.1, 0.0, -0.1])], labels=["fitted surface"])
     assert outside_problems(ax.figure) == []
+
+
+def test_movement_parameter_table():
+    """``plot_movement_parameters`` of a one-subject fit (the --quick movements part's): its
+    two-line title inside the figure (one line ran off both sides)."""
+    import dataclasses
+
+    names = ("KJ_chol_00", "KJ_chol_10", "KJ_chol_11", "q_rest_1", "q_rest_2", "log_tau", "log_tau0", "delay")
+    values = dict.fromkeys(f.name for f in dataclasses.fields(fitting.MovementFit))
+    values.update(subjects=("S1",), param_names=names, params=np.linspace(-1.0, 1.0, 8)[None],
+                  stderr=np.full((1, 8), 0.01), unidentified=((("q_rest_1", "q_rest_2"),),), model="lambda0",
+                  damping="tau0_KJ", time_constants="seconds")
+    assert layout_problems(fitting.plot_movement_parameters(fitting.MovementFit(**values))) == []

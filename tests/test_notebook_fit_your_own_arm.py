@@ -4,6 +4,7 @@ the same fit (subject S1 of the shipped synthetic example at ``--quick`` sizes) 
 import json
 from pathlib import Path
 
+from _layout import checking_part_figures
 from _notebooks import run_notebook
 
 import pmpjax as pj
@@ -18,9 +19,14 @@ def test_notebook_fit_your_own_arm_runs_and_its_assertions_hold(monkeypatch):
 def test_movements_part(tmp_path):
     """`pmpjax reproduce --quick --only movements`: S1's fit converges, its time constants are within
     15 % of the example's truth, its held-out reaches are predicted within 1° median RMSE and at
-    most half the pseudo-inverse's, and its tables and figures are written."""
-    res = cli.reproduce(tmp_path, quick=True, only=["movements"], progress=False, cache=False)["movements"]
+    most half the pseudo-inverse's, and its tables and figures are written (titles and legends inside
+    the figures, off the data)."""
+    with checking_part_figures() as layout:
+        res = cli.reproduce(tmp_path, quick=True, only=["movements"], progress=False, cache=False)["movements"]
     assert res["status"] == "ok", res
+    # plot_movements and plot_movement_parameters: titles and legends inside, off the data
+    assert set(layout) == {"movements_S1.png", "movements_parameters.png"}
+    assert {name: problems for name, problems in layout.items() if problems} == {}
     r = res["results"]
     truth = json.loads((Path(pj.__file__).parent / "data" / "examples" / "reaching" / "truth.json").read_text())
     assert r["converged"] == [1, 1] and r["held_out_reaches"] == 6

@@ -101,13 +101,13 @@ def plot_movement_parameters(fit: MovementFit):
         i, a = names.index(r["parameter"]), fit.subjects.index(r["subject"])
         text = f"{r['value']:.3g} ± {r['stderr']:.2g}" if np.isfinite(r["value"]) else "—"
         cells[i][a] = text + ("" if r["identified"] else " (gauge)")
-    fig, ax = plt.subplots(figsize=(2.2 + 1.9 * len(fit.subjects), 0.24 * len(names) + 1.0))
+    fig, ax = plt.subplots(figsize=(max(4.6, 2.2 + 1.9 * len(fit.subjects)), 0.24 * len(names) + 1.2))
     ax.axis("off")
     table = ax.table(cellText=cells, rowLabels=names, colLabels=list(fit.subjects), loc="center", cellLoc="right")
     table.auto_set_font_size(False)
     table.set_fontsize(7)
     table.scale(1.0, 1.1)
-    ax.set_title(f"fitted parameters ({fit.model}, W: {fit.damping}, time constants in {fit.time_constants})",
+    ax.set_title(f"fitted parameters\n({fit.model}, W: {fit.damping}, time constants in {fit.time_constants})",
                  fontsize=9)
     fig.tight_layout()
     return fig
