@@ -29,6 +29,7 @@ LEAD_ON = (1.6, 2.6)
 RELEASE = 2.6
 TOUCH_1J = 0.4  # the grasp case: one-joint reach 0 -> 1, touched at 0.4 s
 LEAD_THRESHOLD_DOC = 0.5  # [Nm]: ReflexNetwork's documented default lead_threshold
+TOUCH_THRESHOLD_DOC = 0.5  # [N]: its documented default touch_threshold (scripted touches 10 % below / above)
 # Lead pushes ramped up over RAMP s, sized by the documented threshold: the static joint torque
 # J^T F of the largest-loaded joint at the settled posture times these factors (the record's own
 # torque deviation, checked in the test, lies just below / just above the threshold).
@@ -43,7 +44,8 @@ def scenarios(arm, free_arm, P):
     (probe at the back of the hand), 2 lead + 15 N push, 3 the same push without lead, 4 lead +
     a push just below the documented lead threshold, 5 one-joint reach touched at 0.4 s
     (scripted), 6 two moves issued at 0 and 0.5 s, 7 three moves issued at 0.1, 0.4 and 0.6 s,
-    8 lead + a push just above the threshold."""
+    8 lead + a push just above the threshold, 9 and 10 scenario 5 touched on the palm 10 % below
+    and 10 % above the documented touch threshold."""
     dt = arm.dt
     T = int(round(DUR / dt))
     t = np.arange(T) * dt
@@ -67,6 +69,8 @@ def scenarios(arm, free_arm, P):
         pj.script_inputs(arm, DUR, targets=[(0.0, a), (0.5, b)]),
         pj.script_inputs(arm, DUR, targets=[(0.1, a), (0.4, b), (0.6, c)]),
         pj.script_inputs(arm, DUR, targets=[(0.0, P[1])], lead=[LEAD_ON]),
+        *(pj.script_inputs(arm, DUR, targets=[(0.0, one_joint)],
+                           touch=[(TOUCH_1J, TOUCH_1J + 0.05, fac * TOUCH_THRESHOLD_DOC, 0.0)]) for fac in (0.9, 1.1)),
     ]
     n = len(inputs)
     probe = np.tile(np.asarray(PROBE_PARK), (n, T, 1))
@@ -215,6 +219,15 @@ def test_lead_yields_to_a_push_above_threshold_only(arm, scenarios):
     assert moved[0] < 1e-12  # below: the set-point does not back off (round-off of q + τ/K)...
     assert moved[1] > 1e-3  # ...above: it does
     assert np.abs(tr.hand[4, -1] - tr.hand[4, k0]).max() < 0.01  # and the arm pushed below it returns
+
+
+def test_a_touch_grasps_above_the_documented_threshold_only(scenarios):
+    """The documented default touch threshold (0.5 N) by behaviour: the one-joint reach touched on
+    the palm at 0.4 s with 0.45 N goes on reaching, with 0.55 N it grasps (from the touch on)."""
+    mode, t = scenarios["mode"], scenarios["t"]
+    touched = (t >= TOUCH_1J) & (t < TOUCH_1J + 0.05)
+    assert np.all(mode[9] != GRASP)
+    assert np.any(mode[10][touched] == GRASP) and not np.any(mode[10][t < TOUCH_1J] == GRASP)
 
 
 def test_overlapping_reflex_moves_sum(arm, scenarios):
