@@ -153,11 +153,12 @@ def test_a_part_whose_fits_did_not_all_converge_says_so(tmp_path, monkeypatch, c
     assert saved["partial"]["all_converged"] is False
     assert saved["whole"]["converged"] == [2, 2] and saved["whole"]["all_converged"] is True
     html = (tmp_path / "report.html").read_text()
-    assert "<td class='partial'>ok, 0/3 converged</td>" in html and "<td class='ok'>ok</td>" in html
-    assert ".partial{color:#b36b00}" in html and ".ok{color:#060}" in html  # amber, green
-    assert "| [partial](#partial) | ok, 0/3 converged |" in (tmp_path / "report.md").read_text()
+    # none of its fits converged: not "ok" (red)
+    assert "<td class='failed'>none of 3 fits converged</td>" in html and "<td class='ok'>ok</td>" in html
+    assert ".failed{color:#b00}" in html and ".ok{color:#060}" in html  # red, green
+    assert "| [partial](#partial) | none of 3 fits converged |" in (tmp_path / "report.md").read_text()
     err = capsys.readouterr().err
-    assert "partial: ok, 0/3 converged" in err and "whole: ok in" in err
+    assert "partial: none of 3 fits converged" in err and "whole: ok in" in err
     assert "(1/2 parts)" in err and "(2/2 parts)" in err
     assert cli.main([*RUN, str(tmp_path), "--only", "whole"]) == 0  # every fit of the parts run converged
 
