@@ -120,9 +120,10 @@ def test_movement_parameter_table():
     two-line title inside the figure (one line ran off both sides)."""
     import dataclasses
 
-    names = ("KJ_chol_00", "KJ_chol_10", "KJ_chol_11", "q_rest_1", "q_rest_2", "log_tau", "log_tau0", "delay")
+    names = ("KJ_chol_00", "KJ_chol_10", "KJ_chol_11", "q_rest[shoulder_abduction]", "q_rest[elbow_flexion]",
+             "log_tau", "log_tau0", "delay")  # (long row labels push the table right)
     values = dict.fromkeys(f.name for f in dataclasses.fields(fitting.MovementFit))
     values.update(subjects=("S1",), param_names=names, params=np.linspace(-1.0, 1.0, 8)[None],
-                  stderr=np.full((1, 8), 0.01), unidentified=((("q_rest_1", "q_rest_2"),),), model="lambda0",
+                  stderr=np.full((1, 8), 0.01), unidentified=((names[3:5],),), model="lambda0",
                   damping="tau0_KJ", time_constants="seconds")
     assert layout_problems(fitting.plot_movement_parameters(fitting.MovementFit(**values))) == []

@@ -107,7 +107,8 @@ def plot_movement_parameters(fit: MovementFit):
     table.auto_set_font_size(False)
     table.set_fontsize(7)
     table.scale(1.0, 1.1)
-    ax.set_title(f"fitted parameters\n({fit.model}, W: {fit.damping}, time constants in {fit.time_constants})",
+    # (over the figure, not the axes: the row labels push the axes right of the figure's centre)
+    fig.suptitle(f"fitted parameters\n({fit.model}, W: {fit.damping}, time constants in {fit.time_constants})",
                  fontsize=9)
     fig.tight_layout()
     return fig
