@@ -281,3 +281,18 @@ def test_simulate_command_reports_movements_that_stop_short(tmp_path, capsys):
     assert np.linalg.norm(x0) < 1e-12
     np.testing.assert_allclose(np.array(s["final_task_error"]) / d0, 1 - _xi(0.1), rtol=1e-6)
     assert "8 not successful" in capsys.readouterr().out
+
+
+def test_batches_built_from_fitted_values_are_not_stopped_by_one_item():
+    """The library's own batches (pointing predictions and fits through ``normalised_movements``)
+    skip the unit checks: a diverged fit's q_rest of −94 rad in one item does not stop the other
+    (the user's values are checked where the user passes them)."""
+    from pmpjax.internal import normalised_movements
+
+    KJ2 = np.broadcast_to(KJ, (2, 3, 3))
+    q_rest = np.array([Q_REST, [-94.5, 0.0, 0.0]])
+    tr = normalised_movements(KJ2, q_rest, np.array([0.2, 0.2]), np.array([0.2, 0.2]), np.array([Q0, Q0]),
+                              np.array([TARGET, TARGET]), span=2.5, dt=0.01)
+    assert np.asarray(tr.q).shape[0] == 2 and np.isfinite(np.asarray(tr.q)[0]).all()
+    with pytest.raises(ValueError, match="`q_rest`"):
+        pj.Lambda0PMP(WRIST, KJ=KJ2, q_rest=q_rest, W=0.08 * KJ2)

@@ -67,3 +67,4 @@ from .validate import positive_float as positive_float
 from .validate import read_text_file as read_text_file
 from .validate import to_jax as to_jax
 from .validate import warn_without_x64 as warn_without_x64
+from .validate import without_unit_checks as without_unit_checks

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 from pathlib import Path
 from typing import Any
@@ -266,6 +268,22 @@ PLAUSIBLE_DURATION = 10.0
 MAX_JOINT_ANGLE = 2 * np.pi
 
 
+_UNIT_CHECKS = contextvars.ContextVar("pmpjax_unit_checks", default=True)
+
+
+@contextlib.contextmanager
+def without_unit_checks():
+    """Within: :func:`check_seconds` and :func:`check_joint_angles` check nothing. For batches the
+    library builds from fitted or generated values (e.g. ``normalised_movements``), whose items
+    report a failure by their status instead of stopping the batch; a user's values are checked
+    at the public functions they pass them to."""
+    token = _UNIT_CHECKS.set(False)
+    try:
+        yield
+    finally:
+        _UNIT_CHECKS.reset(token)
+
+
 def _largest(a: np.ndarray) -> tuple[float, str]:
     """The largest ``|a|`` and where it is (``" (item i, j)"`` for arrays of more than one value)."""
     flat = np.abs(a).reshape(-1)
@@ -282,7 +300,7 @@ def check_seconds(name: str, v: Any, *, kind: str = "time constant") -> None:
     :data:`MAX_DURATION` (60 s), a warning above :data:`PLAUSIBLE_DURATION` (10 s). The message
     names ``name``, the value and the unit it probably is in. Only concrete values are checked
     (inside a caller's ``jit`` nothing is raised)."""
-    if v is None or not is_concrete(v):
+    if v is None or not is_concrete(v) or not _UNIT_CHECKS.get():
         return
     a = np.asarray(v, dtype=float)
     if a.size == 0 or not np.all(np.isfinite(a)):
@@ -308,7 +326,7 @@ def check_joint_angles(name: str, q: Any, chain=None) -> None:
     beyond ``chain.angle_limit`` [rad] runs with a warning (a chain with a human range: the wrist's
     π/2, the shoulder–elbow arm's π). The message names ``name``, the value and its size in
     degrees. Only concrete values are checked (inside a caller's ``jit`` nothing is raised)."""
-    if q is None or not is_concrete(q):
+    if q is None or not is_concrete(q) or not _UNIT_CHECKS.get():
         return
     a = np.asarray(q, dtype=float)
     if a.size == 0 or not np.all(np.isfinite(a)):

@@ -55,6 +55,7 @@ from .._base import (
     pad_rows,
     read_text_file,
     replace,
+    without_unit_checks,
 )
 from .._chains import Wrist
 from .._pmp import ArimotoPlanner, Lambda0PMP, equilibrium_posture, simulate
@@ -497,9 +498,10 @@ def normalised_movements(KJ, q_rest, tau0_ratio, tau_ratio, q0, target, *, span,
     args = (KJ, q_rest, tau0_ratio, tau_ratio, q0, target)
     xp = np if is_concrete(*args) else jnp  # (padding concrete inputs in NumPy compiles nothing)
     KJ, q_rest, r0, r, q0, target = (pad_rows(xp.asarray(a, float), Bp) for a in args)
-    model = Lambda0PMP(Wrist(d), KJ=KJ, q_rest=q_rest, W=r0[:, None, None] * KJ)
-    tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span), dt=float(dt),
-                  solver=solver)
+    with without_unit_checks():  # (fitted values: an item out of range fails by its status, not the batch)
+        model = Lambda0PMP(Wrist(d), KJ=KJ, q_rest=q_rest, W=r0[:, None, None] * KJ)
+        tr = simulate(model, ArimotoPlanner(k=None, tau=r, tau0=r0), q0, target, duration=float(span),
+                      dt=float(dt), solver=solver)
     return replace(tr, **{k: head_rows(getattr(tr, k), B)
                           for k in ("q", "x", "qdot", "xdot", "manipulability", "status")})
 
