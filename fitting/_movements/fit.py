@@ -320,8 +320,8 @@ def fit_movements(
       generator); ``damping``: "tau0_KJ" (Eq 7), "diagonal" or "full"; ``time_constants``:
       "seconds" (one τ, τ0 per subject; the default) or "fractions" (of each reach's duration).
       Measured on the shipped example (two subjects, trial 1 fitted, trial 2's 12 reaches held
-      out; reaches of 1.0–1.4 s): seconds 0.29° held-out median RMSE, fractions 0.89°, AIC lower
-      by 2 800 and 1 250 for seconds. Those recordings were made with time constants in seconds;
+      out; reaches of 1.0–1.4 s): seconds 0.22° and 0.23° held-out median RMSE, fractions 0.61°
+      and 0.64°, AIC lower by 670 and 210 for seconds. Those recordings were made with time constants in seconds;
       with reaches of one duration the two coincide (the planar test fits fractions).
     - ``max_steps``: Levenberg–Marquardt iterations of stage 1 (final postures) and stage 2
       (trajectories; 0: a Donders-fitted model).
