@@ -102,10 +102,10 @@ def _donders_nio(ctx) -> dict:
                         for K, q in zip(KJ, q_rest)])
     z = np.einsum("spq,sq->sp", res.directions, res.coefficients - truth_c) / res.direction_stderr
     z_ident = np.where(res.identifiable, np.abs(z), 0.0).max(axis=-1)
-    rows = [{"subject": nm, "status": int(res.status[i]), "residual_rms_deg": float(np.rad2deg(res.rms[i])),
-             "held_out_torsion_rms_deg": float(rms_deg[i]), "max_abs_z_identifiable": float(z_ident[i]),
-             **{f"KJ_{a}{b}": float(res.KJ[i, a, b]) for a in range(3) for b in range(a, 3)},
-             **{f"KJ_{a}{b}_true": float(KJ[i, a, b]) for a in range(3) for b in range(a, 3)}}
+    rows = [{"subject": nm, "status": int(res.status[i]), "residual_rms [deg]": float(np.rad2deg(res.rms[i])),
+             "held_out_torsion_rms [deg]": float(rms_deg[i]), "max_abs_z_identifiable": float(z_ident[i]),
+             **{f"KJ_{a}{b} [Nm/rad]": float(res.KJ[i, a, b]) for a in range(3) for b in range(a, 3)},
+             **{f"KJ_{a}{b} true [Nm/rad]": float(KJ[i, a, b]) for a in range(3) for b in range(a, 3)}}
             for i, nm in enumerate(names)]
     ctx.table(rows, "donders_nio.csv",
               "NIO fits of the six Table subjects: residual, held-out torsion error on a 7 × 7 grid of "
