@@ -171,6 +171,49 @@ def slsqp_equilibrium(fk, jac, KJ, q_rest, x, q0=None):
     raise AssertionError(r.message)
 
 
+def _rot_batch(axis, t):
+    c, s, o, z = np.cos(t), np.sin(t), np.ones_like(t), np.zeros_like(t)
+    rows = {0: [[o, z, z], [z, c, -s], [z, s, c]], 1: [[c, z, s], [z, o, z], [-s, z, c]],
+            2: [[c, -s, z], [s, c, z], [z, z, o]]}[axis]
+    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+
+
+def wrist_fk_jac_batch(Q):
+    """:func:`wrist_fk` and :func:`wrist_jac` (d = 1) of postures (N, 3) at once: (N, 2), (N, 2, 3)."""
+    A = _rot_batch(0, -Q[:, 0])
+    AB = A @ _rot_batch(2, Q[:, 1])
+    u = (AB @ _rot_batch(1, Q[:, 2]))[..., 0]
+    w = np.stack([np.broadcast_to([-1.0, 0.0, 0.0], u.shape), A[..., 2], AB[..., 1]], 1)  # (N, 3 joints, 3)
+    return u @ P_SCREEN.T, np.einsum("ki,nji->nkj", P_SCREEN, np.cross(w, u[:, None]))
+
+
+def wrist_equilibria(KJ, q_rest, x, *, iterations=8):
+    """``argmin ½ (q − q_rest)ᵀ KJ (q − q_rest)`` s.t. ``wrist_fk(q) = x`` for targets ``x`` (N, 2)
+    at once: Newton on the Lagrange conditions ``KJ (q − q_rest) = Jᵀ λ``, ``fk(q) = x`` from
+    ``q_rest`` (the constraint's curvature by central differences of the Jacobian). Returns
+    postures (N, 3); asserts that the conditions hold to 1e-12."""
+    x = np.atleast_2d(x)
+    N, h = len(x), 1e-6
+    q, lam = np.broadcast_to(q_rest, (N, 3)).astype(float), np.zeros((N, 2))
+
+    def conditions(q, lam):
+        p, J = wrist_fk_jac_batch(q)
+        return np.concatenate([(q - q_rest) @ KJ.T - np.einsum("nki,nk->ni", J, lam), p - x], -1), J
+
+    for _ in range(iterations):
+        r, J = conditions(q, lam)
+        dJ = np.stack([(wrist_fk_jac_batch(q + h * e)[1] - wrist_fk_jac_batch(q - h * e)[1]) / (2 * h)
+                       for e in np.eye(3)], -1)  # (N, 2, 3 [J's column], 3 [joint])
+        M = np.zeros((N, 5, 5))
+        M[:, :3, :3] = KJ - np.einsum("nkij,nk->nij", dJ, lam)
+        M[:, :3, 3:], M[:, 3:, :3] = -np.swapaxes(J, 1, 2), J
+        step = np.linalg.solve(M, -r[..., None])[..., 0]
+        q, lam = q + step[:, :3], lam + step[:, 3:]
+    r, _ = conditions(q, lam)
+    assert np.abs(r).max() < 1e-12, np.abs(r).max()
+    return q
+
+
 # ---------------------------------------------------------------------------------------------
 # IK weights (Khoramshahi et al. 2022), written from the paper with np.linalg and SciPy only
 
