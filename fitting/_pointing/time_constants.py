@@ -12,8 +12,9 @@ subject × movement. Where the time constants scale with each movement's duratio
 ``τ = T_sj/5``; ``pmpjax.synthetic_pointing_experiment`` with ``target_spread``), the per-subject
 pair estimates the subject's typical values, the geometric mean over its movements, not any
 one movement's. The standard errors take ``KJ`` and ``q_rest`` as known: when they come from a
-Donders fit, its error moves τ further (tests/test_pointing.py, the main job's pointing part). The model movement starts at rest in the mean rest posture before the
-movement and goes to the target; it is analysed like the data (cut at the analysis threshold of
+Donders fit, its error moves τ further (tests/test_pointing.py, the main job's pointing part).
+The model movement starts at rest in the mean rest posture before the movement and goes to the
+target; it is analysed like the data (cut at the analysis threshold of
 its peak speed, half a data sample wider on each side as the sample-level cut of the data is on
 average, and resampled at the analysis' normalised times), after passing it through the
 equivalent kernel of the analysis' smoothing spline: the data are smoothed, so the model is
