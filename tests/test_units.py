@@ -296,3 +296,25 @@ def test_batches_built_from_fitted_values_are_not_stopped_by_one_item():
     assert np.asarray(tr.q).shape[0] == 2 and np.isfinite(np.asarray(tr.q)[0]).all()
     with pytest.raises(ValueError, match="`q_rest`"):
         pj.Lambda0PMP(WRIST, KJ=KJ2, q_rest=q_rest, W=0.08 * KJ2)
+
+
+def test_sweep_rows_whose_hand_stops_short_are_not_reached(tmp_path):
+    """A sweep row with τ = 5 s (legal, warned) leaves the hand where it started within 0.4 s: its
+    row is NOT_REACHED, the τ = 0.08 s row succeeds; the final error against the bound of
+    ``test_time_constants_in_milliseconds_inside_jit_end_not_reached`` (at least exp(−3 k T³ /
+    (6 τ² τ0 λ_min)) = 0.49 of the distance left)."""
+    import json
+
+    from fitting._app.sweep_command import run_sweep_config
+
+    path = tmp_path / "s.toml"
+    path.write_text(FIGURE3.replace("duration = 0.4", 'duration = 0.4\ntargets = [[0.2617993877991494, 0.0]]')
+                    + '[sweep]\nmetrics = ["final_error"]\n[sweep.grid]\n"planner.tau" = [0.08, 5.0]\n')
+    with pytest.warns(UserWarning, match="planner.tau"):
+        s = run_sweep_config(path, tmp_path / "o")
+    assert s["status"] == [0, int(pj.Status.NOT_REACHED)] and s["failed"] == 1
+    assert "did not reach the target within the duration" in s["reasons"][1]
+    k, T, tau, tau0 = 22.5, 0.4, 5.0, 0.08
+    err = np.array(s["outputs"]["final_error"])[:, 0] / (np.pi / 12)
+    assert err[0] < 1e-3 and err[1] >= np.exp(-3 * k * T**3 / (6 * tau**2 * tau0 * 0.5))
+    assert json.loads((tmp_path / "o" / "sweep.json").read_text())["status"][1] == int(pj.Status.NOT_REACHED)
