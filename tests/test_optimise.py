@@ -53,6 +53,21 @@ def test_batch_of_exponential_fits_matches_scipy():
         np.testing.assert_allclose(np.asarray(se[i]), se_ref, rtol=1e-6)
 
 
+def test_gauss_newton_gain_matches_lstsq():
+    """The statistical stopping rule's predicted decrease ``½ gᵀ (JᵀJ)⁺ g`` against NumPy's
+    least-squares step ``½ |J δ|²``, ``δ = lstsq(J, r)``: a tall Jacobian with columns of very
+    different scales, and one with an exactly repeated column (a null direction)."""
+    from fitting._optimise.least_squares import _gauss_newton_gain
+
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(500, 6)) * np.array([1e-3, 1.0, 10.0, 1e3, 0.1, 5.0])
+    r = rng.normal(size=500)
+    for Jc in (J, np.concatenate([J, J[:, 2:3]], axis=1)):
+        delta = np.linalg.lstsq(Jc, r, rcond=None)[0]
+        ref = 0.5 * np.sum((Jc @ delta) ** 2)
+        assert abs(float(_gauss_newton_gain(jnp.asarray(Jc), jnp.asarray(r))) / ref - 1) < 1e-10
+
+
 def test_status_max_steps_and_nonfinite():
     r = fitting.least_squares(_rosenbrock, np.array([-1.2, 1.0, 0.3]), (1.0, 100.0), max_steps=2)
     assert int(r.status) == pj.Status.MAX_STEPS and not bool(r.converged) and int(r.steps) == 2

@@ -195,10 +195,22 @@ def least_squares(
 
 
 def _gauss_newton_gain(J, r):
-    """Cost decrease ``½ gᵀ (JᵀJ)⁺ g`` (``g = Jᵀr``) that the full Gauss–Newton step predicts."""
-    U, s, _ = jnp.linalg.svd(J, full_matrices=False)
-    keep = s > 1e-12 * s[0]
-    return 0.5 * jnp.sum(jnp.where(keep, U.T @ r, 0.0) ** 2)
+    """Cost decrease ``½ gᵀ (JᵀJ)⁺ g`` (``g = Jᵀr``) that the full Gauss–Newton step predicts.
+
+    From the (p, p) Gauss–Newton matrix with its columns scaled to unit diagonal (an eigenvalue
+    decomposition of p × p numbers per iteration, where an SVD of the tall (N, p) Jacobian cost
+    about 10 ms per iteration on the reaching fit's N = 32 000): directions whose scaled eigenvalue
+    is below ``1e-13`` of the largest (singular values below ~3e-7 of the largest scaled one, at
+    the precision of ``JᵀJ``) count as unidentifiable and are left out, as the pseudo-inverse
+    leaves out null directions."""
+    g = J.T @ r
+    H = J.T @ J
+    d = jnp.sqrt(jnp.diag(H))
+    d = jnp.where(d > 0, d, 1.0)
+    w, V = jnp.linalg.eigh(H / d[:, None] / d[None, :])
+    z = V.T @ (g / d)
+    keep = w > 1e-13 * w[-1]
+    return 0.5 * jnp.sum(jnp.where(keep, z**2 / jnp.where(keep, w, 1.0), 0.0))
 
 
 def covariance(result: LeastSquaresResult, *, rcond: float = 1e-10):
