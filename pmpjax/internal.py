@@ -63,6 +63,7 @@ from ._base.validate import output_dir as output_dir
 from ._base.validate import read_text_file as read_text_file
 from ._base.validate import to_jax as to_jax
 from ._base.validate import warn_without_x64 as warn_without_x64
+from ._base.validate import without_unit_checks as without_unit_checks
 
 # MJCF site kinematics on MJX (position and Jacobian of a site, batched over postures)
 from ._chains.mjcf import site_jacobians as site_jacobians
