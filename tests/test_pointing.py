@@ -542,7 +542,7 @@ def test_time_constant_standard_errors_match_the_monte_carlo_spread(analysis, ex
     for seed in range(100, 108):
         rep = pj.synthetic_pointing_experiment(subjects=SUBJECTS, n_trials=N_TRIALS, T=tr["T"], tau0_ratio=0.3,
                                                tau_ratio=0.12, target_spread=0.0, duration_jitter=0.03,
-                                               param_jitter=0.03, n_donders=8, seed=seed)
+                                               param_jitter=0.03, n_donders=64, seed=seed)
         tc = fitting.fit_time_constants(fitting.analyze_pointing(rep.recording), tr["KJ"], tr["q_rest"])
         assert tc.converged.all()
         est.append(np.c_[tc.tau0, tc.tau])
