@@ -54,23 +54,30 @@ def pytest_unconfigure(config):
 # Test files, longest first. `--dist loadfile` hands whole files to the workers in collection order
 # (xdist would otherwise sort them by number of tests, which put the single-test notebooks and the
 # springy gradient last): longest first keeps the two workers even to the end instead of leaving
-# one long file to run alone. Files not listed follow in their usual order. Per-file sums of
-# `--durations=0` [s], 2026-12-02, 2 cores at load 5-9 (other jobs): pointing 485, donders 342,
-# reaching 299, jit_safety 272, springy_rollout_gradient 187-218, notebook_donders 142,
-# springy_rollouts 122, springy_reflexes 109, primitives 108, primitives_fits 90, commands 62; the
-# rest from the idle run of 2026-12-01 (simulate 131, ik_weights 150, ...), the notebooks' and
-# main-job parts' files by their parts' compile times.
+# one long file to run alone (and test_movements_mjcf.py runs before the notebook that finds its
+# compiled fit in the run's shared cache). Files not listed (each under 5 s) follow in their usual
+# order. Per-file sums of `--durations=0` (setup + call) [s] of one run with
+# `-n 2 --dist loadfile`, 2026-12-06, 2 cores shared with other jobs (load 14 falling to 5 over the
+# run, so the first files' figures are inflated relative to the last ones'): reaching 1366,
+# ik_weights 1166, movements_mjcf 896, pointing 571, simulate 381, movements 371, accuracy 270,
+# donders 194, jit_safety 181, springy_rollout_gradient 96, notebook_fit_your_own_arm 91,
+# primitives_fits 60, equilibria 55, cli 54 (without a stop test that hung 303 s), stiff 52,
+# notebook_pointing 48, primitives 39, movements_planar 39, main_job_parts 38, ik_data 37,
+# springy_reflexes 36, notebook_ik_weights 35, springy_rollouts 34, notebook_sweeps 31, sweep 25,
+# notebook_lambda0_pmp 20, minimum_jerk_gain 15, notebook_fit_your_own_data 14, commands 9,
+# primitives_part 8.5, models 7.9, compile_options 7.0, sweep_command 6.7, docs 6.3 (mkdocs build
+# --strict in a subprocess), redundancy 5.8, public_api 5.7, units 5.3, optimise 5.2, kinematics 5.2.
 SLOWEST_FIRST = (
-    "test_pointing.py", "test_donders.py", "test_reaching.py", "test_jit_safety.py", "test_ik_weights.py",
-    "test_movements_mjcf.py", "test_simulate.py", "test_movements.py", "test_accuracy.py",
-    "test_springy_rollout_gradient.py", "test_movements_planar.py", "test_notebook_pointing.py",
-    "test_main_job_parts.py", "test_notebook_fit_your_own_arm.py",
-    "test_commands.py", "test_notebook_donders.py", "test_springy_rollouts.py", "test_springy_reflexes.py",
-    "test_primitives.py", "test_notebook_sweeps.py", "test_notebook_ik_weights.py", "test_primitives_fits.py",
-    "test_notebook_lambda0_pmp.py", "test_equilibria.py", "test_cli.py", "test_ik_data.py",
-    "test_primitives_part.py", "test_models.py", "test_kinematics.py", "test_compilation_cache.py",
-    "test_sweep.py", "test_sweep_command.py", "test_notebook_fit_your_own_data.py",
-    "test_docs.py",  # mkdocs build --strict in a subprocess: about 6 s idle
+    "test_reaching.py", "test_ik_weights.py", "test_movements_mjcf.py", "test_pointing.py", "test_simulate.py",
+    "test_movements.py", "test_accuracy.py", "test_donders.py", "test_jit_safety.py",
+    "test_springy_rollout_gradient.py", "test_notebook_fit_your_own_arm.py", "test_primitives_fits.py",
+    "test_equilibria.py", "test_cli.py", "test_stiff.py", "test_notebook_pointing.py", "test_primitives.py",
+    "test_movements_planar.py", "test_main_job_parts.py", "test_ik_data.py", "test_springy_reflexes.py",
+    "test_notebook_ik_weights.py", "test_springy_rollouts.py", "test_notebook_sweeps.py", "test_sweep.py",
+    "test_notebook_lambda0_pmp.py", "test_minimum_jerk_gain.py", "test_notebook_fit_your_own_data.py",
+    "test_commands.py", "test_primitives_part.py", "test_models.py", "test_compile_options.py",
+    "test_sweep_command.py", "test_docs.py", "test_redundancy.py", "test_public_api.py", "test_units.py",
+    "test_optimise.py", "test_kinematics.py",
 )
 
 
