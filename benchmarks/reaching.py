@@ -47,32 +47,43 @@ writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
 Latest figures (2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
 
-Fit cost (2026-12-06 00:39–00:43 UTC, ``results/reaching.json``; load average 0.6 at the start, 2.0 with the
-benchmark itself at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
+Fit cost (2026-12-06 06:00–06:06 UTC, ``results/reaching.json``; load average 5.6 at the start
+(other work on the machine), 2.4 at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
 ``--rounds 3``)::
 
     | | compile [s] | run [s] | per subject [s] | cores |
     |---|---:|---:|---:|---:|
-    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 28 | 56 | 13.9 | 1.64 |
-    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3: 11.4–11.7 s) | — | 11.4 | 11.4 | 1.68 |
-    | SciPy loop, S01 (0.61 s per residual × 15 × 24 iterations, extrapolated) | — | — | 221 | 1.00 |
-    | slow reference SciPy loop, S01 (1.59 s per residual, extrapolated) | — | — | 573 | 1.00 |
+    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 39 | 88 | 21.2 | 0.99 |
+    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3: 11.6–17.3 s) | — | 11.6 | 11.6 | 1.59 |
+    | SciPy loop, S01 (0.63 s per residual × 15 × 24 iterations, extrapolated) | — | — | 228 | 1.00 |
+    | slow reference SciPy loop, S01 (1.64 s per residual, extrapolated) | — | — | 589 | 1.00 |
 
-    S01: SciPy loop / fit_reaching 19× (target 50×: not met); per subject of the 4-subject call
-    16×, 10× with compilation; 11.5× in CPU time (19 CPU-s against 221). The slow reference
-    would report 50×. Per call: arm kinematics 2.2 µs closed form against 31 µs by rotation
-    matrices, the field 13 µs against 44 µs. NumPy cost at the JAX optimum 3.9073, JAX 3.9073;
-    closed form against the slow reference: fields 1.2e-12 (relative), residuals 2e-11 at the
-    tight tolerances, 6e-8 at the baseline's. Every subject converged; integration error at the
-    optimum ≤ 0.0001°.
+    S01: SciPy loop / fit_reaching 20× (target 50×: not met); per subject of the 4-subject call
+    11× (run under load 3.5), 7× with compilation; 12× in CPU time (18 CPU-s against 228). The
+    slow reference would report 51×. Per call: arm kinematics 2.2 µs closed form against 31 µs by
+    rotation matrices, the field 13 µs against 49 µs. NumPy cost at the JAX optimum 3.9073, JAX
+    3.9073; closed form against the slow reference: fields 1.2e-12 (relative), residuals 2e-11 at
+    the tight tolerances, 6e-8 at the baseline's. Every subject converged; integration error at
+    the optimum ≤ 0.0001°.
 
-    Cores: the SciPy loop runs on one thread (its thread 1.00 core; the process 1.16, other
-    threads of the process busy meanwhile); fit_reaching keeps 1.64–1.68 cores busy with 3
-    threads (XLA's CPU client, one device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads
-    but 3×4 products and 3×3 solves stay on the calling thread; ``OPENBLAS_NUM_THREADS=1`` does
-    not change the baseline's time. The JAX side's run time varies with the machine's other work
-    far more than the SciPy loop's (S01 alone took 10.9–16.6 s over four full runs within the hour
-    before, a residual call 0.61–0.66 s: 14–21×).
+    Where the time goes (S01, warm): 25 linearisations of stage 2 (24 iterations, none rejected)
+    take all but a few percent of it; each is one forward-mode Jacobian through ``simulate``,
+    about 25 primal residuals' worth (RODAS4's Jacobian of the field, differentiated along the 14
+    parameter tangents, dominates: 5 columns × 14 second-order directions per step). Stage 1
+    (0.14 s) and the integration-error check (0.07 s) take little (both measured under load). The
+    statistical stopping rule uses a p × p eigendecomposition (1.4 ms per iteration) where an SVD
+    of the 32 000 × 14 Jacobian costs 95–270 ms under XLA:CPU (measured under load). Measured and
+    kept: XLA's fusion emitters in place of ``fast_compile_jit``'s legacy ones run the Jacobian
+    alone up to 2× faster but not the whole fit (CPU time 18.8 s against 19.2 s, compile 1.7×
+    longer); the unrolled RODAS4 stages in the Jacobian (``stage_loop=False``) run no faster and
+    compile 1.4× longer.
+
+    Cores: the SciPy loop runs on one thread (its thread 0.99 core; the process 1.15, other
+    threads of the process busy meanwhile); fit_reaching keeps 1.59 cores busy with 2 threads
+    (XLA's CPU client, one device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads but 3×4
+    products and 3×3 solves stay on the calling thread. The JAX side's run time varies with the
+    machine's other work far more than the SciPy loop's (S01 alone 11.6–17.3 s over the three
+    rounds, a residual call 0.63–0.66 s).
 
 Held-out table (2026-12-05 16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12
 variants + the Donders-only model; ``results/reaching_table.md``): every fit of every variant
