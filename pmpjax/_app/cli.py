@@ -30,6 +30,7 @@ import warnings
 from .parts import as_part, available_parts
 from .reproduce import default_jobs, reproduce
 from .text import plain, positive_int
+from .workers import pools_interrupted
 
 EXIT_STATUS = """\
 exit status (every command):
@@ -172,4 +173,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         resume = getattr(args, "resume", None)
         print(f"pmpjax {command}: interrupted" + (f"; {resume(args)}" if resume else ""), file=sys.stderr)
+        if pools_interrupted():  # (the interpreter's exit could wait forever on the ended workers' pools)
+            with contextlib.suppress(OSError, ValueError):
+                sys.stdout.flush()
+                sys.stderr.flush()
+            os._exit(130)
         return 130

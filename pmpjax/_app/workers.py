@@ -125,6 +125,18 @@ def _worker_run(name: str, part, out: str, quick: bool, seed: int) -> dict:
     return json_safe(entry)  # (plain data back to the parent)
 
 
+_INTERRUPTED = []  # set when Ctrl-C ended this process's worker pools (see pools_interrupted)
+
+
+def pools_interrupted() -> bool:
+    """Whether Ctrl-C ended worker pools of this process (and clears that). The interpreter's exit
+    would then join the pools' management threads (``concurrent.futures``), which can wait
+    forever on the ended workers; the command line ends the process at once instead."""
+    found = bool(_INTERRUPTED)
+    _INTERRUPTED.clear()
+    return found
+
+
 def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, record) -> None:
     """Run ``todo`` (in that order) on ``n_workers`` spawned processes, one part at a time each,
     recording each entry as it arrives; a part that ``follows`` another runs right after it on
@@ -233,9 +245,16 @@ def run_in_workers(todo, parts, n_workers, *, out, quick, seed, cache_dir, ui, r
             if not collect(send(pool, name), name):
                 record(name, crashed(name))
             pool.shutdown(wait=False, cancel_futures=True)
-    except BaseException:  # (Ctrl-C, or the parent failed): a part still running must not hold up the exit
-        for proc in set(mp.active_children()) - others:
+    except BaseException as e:  # (Ctrl-C, or the parent failed): a part still running must not hold up the exit
+        if isinstance(e, KeyboardInterrupt):
+            _INTERRUPTED.append(True)
+        ours = set(mp.active_children()) - others
+        for proc in ours:
             proc.terminate()
+        for proc in ours:
+            proc.join(timeout=2)
+            if proc.is_alive():
+                proc.kill()
         raise
     finally:
         for pool in pools:
