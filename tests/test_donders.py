@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 import scipy.stats
 from _problems import TABLE2, table_kj
-from _reference import central_diff, slsqp_equilibrium, symmetric_directions, wrist_fk, wrist_jac
+from _reference import central_diff, symmetric_directions, wrist_equilibria
 from scipy.spatial.transform import Rotation
 
 import fitting
@@ -452,15 +452,16 @@ MC_REPLICATES, MC_SIGMA = 40, np.deg2rad(0.3)
 
 @pytest.fixture(scope="module")
 def monte_carlo():
-    """Table subject 1 at 500 fixed pointing targets; postures = SciPy-SLSQP equilibria (not
-    pmpjax's) twisted about the pointing axis by N(0, 0.3°) torsion, 40 replicates fitted as 40
-    subjects of one fit_donders call (the `nio` fixture's compiled chunk: 8 subjects, 2 starts).
+    """Table subject 1 at 500 fixed pointing targets; postures = equilibria by NumPy (Newton on
+    the Lagrange conditions, exact to 1e-12; not pmpjax's) twisted about the pointing axis by
+    N(0, 0.3°) torsion, 40 replicates fitted as 40 subjects of one fit_donders call (the `nio`
+    fixture's compiled chunk: 8 subjects, 2 starts).
     Torsion noise leaves the pointing unchanged, so the truth's loss is exactly ½ Σ ε²."""
     K, qr = table_kj(0, normalize=True), TABLE2[0]
     rng = np.random.default_rng(21)
     h = np.sin(np.deg2rad(20.0))
     x = rng.uniform(-h, h, size=(N_FIT, 2))
-    q_eq = np.stack([slsqp_equilibrium(wrist_fk, wrist_jac, K, qr, xi) for xi in x])
+    q_eq = wrist_equilibria(K, qr, x)
     eps = rng.normal(scale=MC_SIGMA, size=(MC_REPLICATES, N_FIT))
     R_eq = Rotation.from_euler("XZY", q_eq * [-1, 1, 1])
     postures = np.stack(
