@@ -488,6 +488,35 @@ def machine() -> str:
     return f"{os.cpu_count()}-core {model} (KVM), no GPU"
 
 
+def versions(*extra: str) -> dict:
+    """Versions of Python and of the packages a benchmark's figures depend on (``None`` when one
+    is not installed); ``extra`` names further distributions (e.g. ``"diffrax"``)."""
+    import platform
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for name in ("jax", "jaxlib", "numpy", "scipy", "mujoco", *extra):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def header(parameters: dict, *extra: str) -> dict:
+    """The common head of a ``results/<name>.json``: date (UTC), machine, CPU count, versions,
+    the 1-, 5- and 15-minute load averages at the start, and the run's parameters. The caller adds
+    its data, ``tables`` (the printed tables) and ``load_end`` (:func:`load_average`)."""
+    return {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": machine(),
+            "cpu_count": os.cpu_count(), "versions": versions(*extra), "load_start": load_average(),
+            "parameters": parameters}
+
+
+def load_average() -> list[float]:
+    """The 1-, 5- and 15-minute load averages, rounded to 0.01."""
+    return [round(v, 2) for v in os.getloadavg()]
+
+
 def write_results(name: str, res: dict) -> str:
     """Write ``res`` to ``<results>/<name>.json``; returns the path. ``<results>`` is
     ``$PMPJAX_BENCH_RESULTS`` (set by ``python -m benchmarks``) or ``benchmarks/results``."""
