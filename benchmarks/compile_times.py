@@ -7,32 +7,37 @@ XLA compilation and one-off host work) and ``second`` as run time, against a bud
 first call (the last column).
 
 Usage: ``python benchmarks/compile_times.py [--only CASE ...] [--quick]`` (``--quick`` runs two
-cheap cases and writes nothing).
+cheap cases and writes nothing); writes ``benchmarks/results/compile_times.json`` (date, machine,
+versions, load average, the cases and the table as data).
 
-Latest figures (2026-12-02 00:45–01:00 UTC, 2-core AMD EPYC Zen 4 KVM, no GPU, JAX 0.10.2,
-float64; load 1.5 at the start, ≈ 2.5 from ``equilibrium_posture`` on, when a test run shared the
-machine — so the later rows are inflated by up to ~1.5×; the paired measurements below were
-taken after it, with the compile options they describe in place, and are lower)::
+Latest figures (2026-12-06 07:09–07:12 UTC, ``results/compile_times.json``; 2-core AMD EPYC (Zen 4)
+KVM, no GPU, Python 3.11, JAX 0.10.2, float64; default cases, about 3 min). The machine is shared
+with other developers' test runs: the load average rose from 2.6 at the start to 8.5 at the end
+(above 4 from ``fit_donders`` on), so every time here is an upper bound and the later rows more so::
 
     case                     compile [s]   run [s]  within 3 s
-    simulate                        6.06     0.018  no
-    simulate_final                  5.04     0.012  no
-    grad_simulate                  23.47     0.063  no
-    equilibrium_posture             3.67     0.004  no
-    figure3_data                    7.57     0.030  no
-    fit_donders                    27.48     3.877  no
-    estimate_ik_weights             4.17     0.793  no
-    estimate_ik_weights_lm         12.21     4.706  no
-    pointing_pipeline               9.49     1.111  no
-    fit_time_constants             38.66     1.223  no
-    arm_equilibrium                 9.60     0.011  no
-    rollout_mjx                    19.30     0.106  no
-    rollout_mujoco                  0.09     0.012  yes
+    simulate                        1.85     0.005  yes
+    simulate_final                  1.58     0.005  yes
+    grad_simulate                  10.17     0.054  no
+    equilibrium_posture             1.44     0.001  yes
+    figure3_data                    2.39     0.012  yes
+    fit_donders                     7.46     1.209  no
+    estimate_ik_weights             5.10     0.229  no
+    estimate_ik_weights_lm          4.65     2.213  no
+    pointing_pipeline               3.87     9.043  no
+    fit_time_constants             31.53     0.112  no
+    arm_equilibrium                 5.71     0.009  no
+    rollout_mjx                     9.12     0.034  no
+    rollout_mujoco                  0.01     0.012  yes
 
-Only the C MuJoCo rollout meets the 3 s budget. What the compile time is: XLA's CPU compilation of
-graphs that hold the RK4 step (the chain, the redundancy solve and the planner), forward-mode
-Jacobians of whole simulations (the fits) or MJX kinematics inside Newton's loop; run times are
-milliseconds to seconds. Each entry point's docstring states its cost. What users can do: the
+Five cases meet the 3 s budget: ``simulate`` (both save modes), ``equilibrium_posture``,
+``figure3_data`` and the C MuJoCo rollout. The fits and the gradient do not: ``fit_time_constants``
+(31.5 s, under a load of 8) and ``grad_simulate`` (10.2 s) compile longest. ``pointing_pipeline``'s
+second call took 9.0 s at a load of 6.7, so its split into compile and run is uncertain in this run.
+
+What the compile time is: XLA's CPU compilation of graphs that hold the RK4 step (the chain, the
+redundancy solve and the planner), forward-mode Jacobians of whole simulations (the fits) or MJX
+kinematics inside Newton's loop; run times are milliseconds to seconds. Each entry point's docstring states its cost. What users can do: the
 persistent compilation cache (the command line turns it on; a second run of the main job compiles
 nothing), and keeping shapes fixed (batch sizes are bucketed to powers of two, so similar sizes
 share a compile).
@@ -61,12 +66,9 @@ How the library keeps compiles down, each measured in paired fresh processes:
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
-import time
-from pathlib import Path
 
 BUDGET_S = 3.0
 
@@ -168,31 +170,38 @@ def run_case(name: str) -> dict:
 
 
 def main(argv=None) -> int:
+    import _baselines as bl
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
     names = args.only or (["equilibrium_posture", "rollout_mujoco"] if args.quick else list(CASES))
+    out = bl.header({"budget_s": BUDGET_S, "cases": names, "compilation_cache": False})
     rows = []
     print(f"load average {os.getloadavg()[0]:.1f}", flush=True)
     print(f"{'case':24s} {'compile [s]':>11s} {'run [s]':>9s}  budget {BUDGET_S:g} s")
+    lines = ["| case | compile [s] | run [s] | within 3 s |", "|---|---:|---:|---|"]
     for n in names:
         r = run_case(n)
+        r["load"] = os.getloadavg()[0]
         rows.append(r)
         if "error" in r:
             print(f"{n:24s} ERROR {r['error']}", flush=True)
+            lines.append(f"| {n} | error: {r['error']} | | |")
         else:
             ok = "yes" if r["compile_s"] <= BUDGET_S else "no"
             print(f"{n:24s} {r['compile_s']:11.2f} {r['run_s']:9.3f}  {ok}", flush=True)
-    out = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load": os.getloadavg()[0],
-           "budget_s": BUDGET_S, "rows": rows,
-           "ratios": {f"budget/compile {r['case']}": BUDGET_S / max(r["compile_s"], 1e-3)
-                      for r in rows if "compile_s" in r},
-           "targets": {f"budget/compile {r['case']}": 1.0 for r in rows if "compile_s" in r}}
+            lines.append(f"| {n} | {r['compile_s']:.2f} | {r['run_s']:.3f} | {ok} |")
+    out.update(rows=rows,
+               ratios={f"budget/compile {r['case']}": BUDGET_S / max(r["compile_s"], 1e-3)
+                       for r in rows if "compile_s" in r},
+               targets={f"budget/compile {r['case']}": 1.0 for r in rows if "compile_s" in r},
+               tables=["\n".join(lines)], load_end=bl.load_average())
+    print("\n" + "\n".join(lines))
+    print(f"load average {out['load_start'][0]:.1f} -> {out['load_end'][0]:.1f}")
     if not args.quick:
-        res = Path(os.environ.get("PMPJAX_BENCH_RESULTS", Path(__file__).parent / "results"))
-        res.mkdir(parents=True, exist_ok=True)
-        (res / "compile_times.json").write_text(json.dumps(out, indent=1))
+        print("wrote", bl.write_results("compile_times", out))
     return 0
 
 
