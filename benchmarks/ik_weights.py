@@ -8,34 +8,39 @@ and one bounded QP per iteration on ``Ψ̃``, ``Ω̃`` (``scipy.optimize.lsq_lin
 [w_min, 1]) — on the first 10 subjects. Also: batch-size scaling and the real-data estimate
 (HuG-MP, 4 subjects × 6 tasks, point estimate and a bootstrap).
 
-Run: ``python benchmarks/ik_weights.py [--quick]``; writes ``benchmarks/results/ik_weights.json``
-after each stage (so a partial run leaves its figures). The script sets
+Run: ``python benchmarks/ik_weights.py [--quick]`` (about 2 min on 2 cores; ``--quick``: 200
+subjects, 20 iterations); writes ``benchmarks/results/ik_weights.json`` (date, machine, versions,
+load average, parameters, the rows, batch scaling and the real-data figures) after each stage (so a
+partial run leaves its figures). The script sets
 ``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` before importing jax and times
 ``estimate_ik_weights`` with ``devices=[one device]`` and with the items split over all devices
 (the default), plus a subprocess pinned to one core (``os.sched_setaffinity``) for the rate of one
 core alone: the baseline is a single-threaded Python loop, while even one XLA:CPU device spreads
 each large fused loop over its intra-op thread pool (CPU time ≈ 1.9× wall time).
 
-Latest figures (2026-12-02 01:23 UTC, 2-core CPU (AMD EPYC Zen 4, KVM), no GPU, float64,
-jax 0.10.2; idle machine, load average 1.2 at start and 1.4 at end):
+Latest figures (2026-12-06 07:16–07:18 UTC, ``results/ik_weights.json``; 2-core AMD EPYC (Zen 4)
+KVM, no GPU, float64, JAX 0.10.2; default size, 1 000 subjects, 112 s). The machine was shared
+with other developers' test runs (load average 8.1 at the start, 8.3 at the end, on 2 cores), so
+the times are upper bounds; ratios are taken within the run:
 
 | implementation                                             | subjects/s | compile+1st run [s] |
 |------------------------------------------------------------|-----------:|--------------------:|
-| NumPy/SciPy per-sample loop + QP (10 subj., 1 core)        |      0.697 |                     |
-| JAX estimate_ik_weights, 1 device pinned to 1 core         |        623 |                     |
-| JAX estimate_ik_weights, 1 device                          |       1218 |                 4.9 |
-| JAX estimate_ik_weights, 2 devices (items split)           |       1043 |                     |
+| NumPy/SciPy per-sample loop + QP (10 subj., 1 core)        |      0.971 |                     |
+| JAX estimate_ik_weights, 1 device pinned to 1 core         |       1600 |                     |
+| JAX estimate_ik_weights, 1 device                          |       1809 |                 9.0 |
+| JAX estimate_ik_weights, 2 devices (items split)           |       1700 |                 6.4 |
 
-speed-up vs baseline: 1748× (best), 1 core alone 894×; weights agree with the baseline to
-1.4e-13, 1 vs 2 devices to 0. Batch scaling (subjects/s, default devices): B = 1: 187, 10: 615,
-100: 1190, 1000: 1400. Real data (4 subjects × 6 tasks): point estimate 9.3 s, bootstrap (20
-replicates, 25 samples/motion) 8.4 s. Target (≥ 1 000× the baseline): met, also by one core alone.
-The baseline's own rate varies twofold between runs on this shared machine (1.36 subjects/s in
-the last quiet run of the full table, where the best JAX rate was 4111 subjects/s, 3025×): only
-same-run ratios count.
+Speed-up against the baseline: 1862× (best, 1 device), 1 core alone 1647×; weights agree with the
+baseline to 1.5e-13, 1 vs 2 devices exactly. Batch scaling (subjects/s, default devices): B = 1:
+522, 10: 831, 100: 1225, 1000: 1305. Real data (HuG-MP, 4 subjects × 6 tasks): point estimate
+with 2 bootstrap replicates (100 samples/motion, at most 200 steps) 16.5 s, bootstrap (20
+replicates, 25 samples/motion) 17.2 s; none of the point estimate's replicates ends with status
+SUCCESSFUL within the 200 steps (``real_data_converged_fraction`` 0.0). Target (≥ 1 000× the
+baseline): met, also by one core alone. The single-threaded baseline's rate moves with the load
+more than the batched call: only same-run ratios count.
 
-Where the time goes (per call of 0.22–0.29 s at B = 1 000, 1 device, each part measured back to
-back in one process):
+Where the time goes (per call of 0.22–0.29 s at B = 1 000, 1 device, on an idle machine, each part
+measured back to back in one process):
 
 - The Algorithm-1 kernel, 0.19–0.23 s (≈ 16 ns per sample-iteration per core: two 3 × 3 weighted
   pseudo-inverse solves, the error and 51 running sums, ≈ 300 flops). Each iteration is one fused
@@ -63,7 +68,6 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 if __name__ == "__main__" and "--single-core" in sys.argv:
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # every XLA thread on one core
@@ -75,6 +79,7 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
+import _baselines as bl  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
@@ -144,18 +149,13 @@ def single_core_worker(quick):
 
 def main(quick=False):
     n_subj, K, iters, gamma, q, x, J = workload(quick)
-    out = Path(__file__).parent / "results" / "ik_weights.json"
-    out.parent.mkdir(exist_ok=True)
     devs = jax.devices()
-    res = {
-        "date": "2026-11-22", "machine": f"{os.cpu_count()}-core CPU, no GPU (shared)",
-        "workload": {"subjects": n_subj, "samples": K, "n": 5, "m": 3, "iterations": iters, "gamma": gamma},
-        "devices": len(devs), "load_average_1min_at_start": os.getloadavg()[0],
-    }
+    res = bl.header({"subjects": n_subj, "samples": K, "n": 5, "m": 3, "iterations": iters, "gamma": gamma,
+                     "baseline_subjects": 10, "devices": len(devs), "quick": quick})
 
     def save(**items):  # results are written as they come
         res.update(items)
-        out.write_text(json.dumps(res, indent=1, default=float))
+        bl.write_results("ik_weights", json.loads(json.dumps(res, default=float)))
 
     c1, t1, w1 = jax_rate(q, x, J, gamma, iters, devs[:1])
     save(jax_1device_seconds=t1, jax_1device_subjects_per_s=n_subj / t1, jax_1device_compile_plus_first_run_s=c1)
@@ -180,10 +180,12 @@ def main(quick=False):
             ("JAX estimate_ik_weights, 1 device pinned to 1 core", single["subjects_per_s"], ""),
             ("JAX estimate_ik_weights, 1 device", n_subj / t1, f"{c1:.1f}"),
             (f"JAX estimate_ik_weights, {len(devs)} devices (items split)", n_subj / tN, f"{cN:.1f}")]
-    print(f"| {'implementation':<58} | {'subjects/s':>10} | {'compile+1st run [s]':>19} |")
-    print(f"|{'-' * 60}|{'-' * 11}:|{'-' * 20}:|")
-    for name, rate, comp in rows:
-        print(f"| {name:<58} | {rate:>10.4g} | {comp:>19} |")
+    lines = ["| implementation | subjects/s | compile+1st run [s] |", "|---|---:|---:|"]
+    lines += [f"| {name} | {rate:.4g} | {comp} |" for name, rate, comp in rows]
+    save(rows=[{"implementation": name, "subjects_per_s": rate,
+                "compile_plus_first_run_s": float(comp) if comp else None} for name, rate, comp in rows],
+         tables=["\n".join(lines)])
+    print("\n".join(lines))
     print(f"speed-up vs baseline: {res['speedup']:.0f}x (best), 1 device {res['speedup_1device']:.0f}x, "
           f"1 core {res['speedup_1core']:.0f}x; weights agree with the baseline to {agree:.1e}, "
           f"1 vs {len(devs)} devices to {res['max_abs_weight_difference_1_vs_n_devices']:.1e}", flush=True)
@@ -205,11 +207,10 @@ def main(quick=False):
     t_real_boot = time.perf_counter() - t
     save(real_data_bootstrap20_s=t_real_boot,
          real_data_ci_halfwidth_median=float(np.nanmedian(real_b["hi"] - real_b["lo"])),
-         load_average_1min_at_end=os.getloadavg()[0])
+         load_end=bl.load_average())
     print(f"real data (4 subjects x 6 tasks): point estimate {t_real_point:.1f} s, "
           f"bootstrap (20 replicates, 25 samples/motion) {t_real_boot:.1f} s")
-    print(f"load average (1 min) {res['load_average_1min_at_start']:.1f} at start, "
-          f"{res['load_average_1min_at_end']:.1f} at end")
+    print(f"load average (1 min) {res['load_start'][0]:.1f} at start, {res['load_end'][0]:.1f} at end")
     return res
 
 
