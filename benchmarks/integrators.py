@@ -15,29 +15,34 @@ state ``q (3, B)``:
   trajectories (state (3,)) so each trajectory controls its own steps.
 
 Accuracy: max |q(0.4 s) − q_ref| over the first 16 trajectories of the B = 1 000 run, ``q_ref``
-from SciPy ``solve_ivp`` DOP853 on an independent NumPy field at rtol 1e-13, atol 1e-15 (at the
-rtol 1e-12 first planned, the reference itself is off by 2e-12, more than RK4 at 1 ms). Gradient:
-``jax.grad`` of ``L = ½ Σ_b |q_b(0.4 s)|²`` with respect to ``(diag KJ, q_rest, τ0)``
-(``W = τ0 KJ``); its error (B = 1, relative to max |∇L|) is against central differences (step 1e-4
-relative) of ``L`` computed with the SciPy reference solver, good to ~1e-8. Speed at B = 1 and B = 1 000: ``jit(f).lower(...).compile()`` time separately,
-then the minimum of repeated runs (``block_until_ready``). Adaptive solves report their mean number
-of steps.
+from SciPy ``solve_ivp`` DOP853 on an independent NumPy field at rtol 1e-13, atol 1e-15 (at rtol
+1e-12 the reference itself is off by 2e-12, more than RK4 at 1 ms). Gradient: ``jax.grad`` of
+``L = ½ Σ_b |q_b(0.4 s)|²`` with respect to ``(diag KJ, q_rest, τ0)`` (``W = τ0 KJ``); its error
+(B = 1, relative to max |∇L|) is against central differences (step 1e-4 relative) of ``L`` computed
+with the SciPy reference solver, good to ~1e-8. Speed at B = 1 and B = 1 000:
+``jit(f).lower(...).compile()`` time separately, then the minimum of repeated runs
+(``block_until_ready``). Adaptive solves report their mean number of steps.
 
-Run: ``python benchmarks/integrators.py`` (≈ 5–8 min, mostly compiling gradients) or ``--quick`` (smoke run, writes nothing).
+Run: ``python benchmarks/integrators.py`` (≈ 4–8 min, mostly compiling gradients) or ``--quick``
+(smoke run, writes nothing); writes ``benchmarks/results/integrators.json`` (date, machine,
+versions, load average, parameters, one entry per solver and the table).
 
-Results (2026-11-22, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, diffrax 0.7.2, float64):
+Latest figures (2026-12-06 07:18–07:22 UTC, ``results/integrators.json``; 2-core AMD EPYC (Zen 4)
+KVM, no GPU, JAX 0.10.2, diffrax 0.7.2, float64; default sizes B = 1 and 1 000, 261 s). The machine
+was shared with other developers' test runs (load average 8.3 at the start, 8.4 at the end, on 2
+cores), so the times are upper bounds and the ratios carry that load's noise:
 
 | solver | steps/traj | max abs err q(0.4) [rad] | grad rel err | B=1: compile [s] | run | grad compile [s] | grad | B=1000: compile [s] | run | grad compile [s] | grad |
 |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|
-| pmpjax RK4 scan (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 0.46+2.50 | 1.3 ms | 3.40+30.03 | 74.5 ms | 0.61+5.05 | 297.9 ms | 5.07+40.87 | 5374.3 ms |
-| diffrax RK4 (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 1.30+3.13 | 0.7 ms | 9.70+20.25 | 49.7 ms | 1.68+3.46 | 315.6 ms | 9.83+22.71 | 6252.0 ms |
-| diffrax Tsit5 (dt 1 ms) | 400 | 2.1e-13 | 8.7e-10 | 0.99+3.76 | 1.1 ms | 13.97+23.46 | 82.9 ms | 0.86+4.16 | 471.8 ms | 12.11+27.66 | 7978.2 ms |
-| diffrax Tsit5 PID (rtol 1e-8) | 74 | 1.5e-09 | 1.1e-08 | 1.87+2.30 | 0.3 ms | 8.88+13.55 | 3.6 ms | 1.06+3.57 | 58.0 ms | 11.32+32.74 | 1978.7 ms |
+| pmpjax RK4 scan (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 0.30+1.92 | 0.8 ms | 2.94+15.68 | 8.5 ms | 0.16+2.54 | 225.3 ms | 2.13+14.43 | 2940.9 ms |
+| diffrax RK4 (dt 1 ms) | 400 | 8.1e-13 | 8.7e-10 | 1.15+1.96 | 0.7 ms | 5.59+11.01 | 26.0 ms | 0.61+2.09 | 307.0 ms | 5.88+20.10 | 2586.3 ms |
+| diffrax Tsit5 (dt 1 ms) | 400 | 2.1e-13 | 8.7e-10 | 0.51+1.98 | 1.1 ms | 6.00+12.53 | 41.1 ms | 0.49+2.54 | 347.4 ms | 6.17+14.55 | 4098.5 ms |
+| diffrax Tsit5 PID (rtol 1e-8) | 74 | 1.5e-09 | 1.1e-08 | 1.51+1.93 | 0.3 ms | 6.80+12.27 | 2.7 ms | 1.07+5.71 | 56.8 ms | 7.29+14.56 | 1139.8 ms |
 
-diffrax RK4 (dt 1 ms): run time × 0.5 (B=1), 1.1 (B=1000), gradient time × 0.7 (B=1), 1.2 (B=1000) relative to the pmpjax RK4 scan.
-diffrax Tsit5 (dt 1 ms): run time × 0.8 (B=1), 1.6 (B=1000), gradient time × 1.1 (B=1), 1.5 (B=1000) relative to the pmpjax RK4 scan.
-diffrax Tsit5 PID (rtol 1e-8): run time × 0.2 (B=1), 0.2 (B=1000), gradient time × 0.0 (B=1), 0.4 (B=1000) relative to the pmpjax RK4 scan.
-RK4 (pmpjax scan) error vs dt: 4 ms → 1.7e-10, 2 ms → 1.1e-11, 1 ms → 8.1e-13, 0.5 ms → 2.5e-13; pmpjax.simulate vs this scan solver: 1.4e-17. Load average 6.9 → 8.1.
+diffrax RK4 (dt 1 ms): run time × 0.88 (B=1), 1.4 (B=1000), gradient time × 3.1 (B=1), 0.88 (B=1000) relative to the pmpjax RK4 scan.
+diffrax Tsit5 (dt 1 ms): run time × 1.3 (B=1), 1.5 (B=1000), gradient time × 4.9 (B=1), 1.4 (B=1000) relative to the pmpjax RK4 scan.
+diffrax Tsit5 PID (rtol 1e-8): run time × 0.35 (B=1), 0.25 (B=1000), gradient time × 0.32 (B=1), 0.39 (B=1000) relative to the pmpjax RK4 scan.
+RK4 (pmpjax scan) error vs dt: 4 ms → 1.7e-10, 2 ms → 1.1e-11, 1 ms → 8.1e-13, 0.5 ms → 2.5e-13; pmpjax.simulate vs this scan solver: 1.4e-17. Load average 8.3 → 8.4.
 
 Conclusion: `pmpjax.simulate` integrates with its own classical RK4 in nested `lax.scan` loops
 (`pmpjax._pmp.integrate.integrate`), dt = 1 ms by default. What the measurements say:
@@ -48,11 +53,13 @@ Conclusion: `pmpjax.simulate` integrates with its own classical RK4 in nested `l
   diffrax's RK4 on the same steps gives the same numbers; Tsit5 on 1 ms steps is 2e-13; adaptive
   Tsit5 at rtol 1e-8 is 1.5e-9. All are far below the 1e-6 rad the tests ask for.
 - **Speed per step.** On the same vector field the scan and diffrax's RK4 run at the same speed
-  within this loaded machine's noise (diffrax 0.55–1.2× the scan's time); Tsit5 with fixed steps
-  costs ~1.5× more at B = 1 000 (6 stages instead of 4). For fixed steps diffrax adds a dependency
-  and nothing else. (The scan's gradient compiles slower: 30–40 s against diffrax's 20–23 s.)
+  within this loaded machine's noise (diffrax 0.88–1.4× the scan's run time; gradients 0.88× at
+  B = 1 000, 3.1× at B = 1); Tsit5 with fixed steps costs ~1.5× more at B = 1 000 (6 stages instead of 4).
+  For fixed steps diffrax adds a dependency and nothing else. Gradients compile in 16–19 s for the
+  scan and 17–26 s for diffrax's RK4.
 - **Adaptive steps are cheaper for a final state.** Tsit5 + PID at rtol 1e-8 needs ~74 steps
-  instead of 400: ~5× faster forward and 3–20× faster gradients than RK4 at 1 ms, for 1.5e-9 rad.
+  instead of 400: 3–4× faster forward and 2.6–3.1× faster gradients than RK4 at 1 ms, for
+  1.5e-9 rad.
 
 pmpjax keeps the fixed-step RK4 scan because fixed steps give static shapes: `SaveAt(every=N)`
 and `SaveAt(ts=...)` save on the step grid without dense-output interpolation, every trajectory of
@@ -214,8 +221,9 @@ def main(quick):
     n_acc = min(16, sizes[-1])
     print(f"pmpjax integrator benchmark — {bl.machine()}, jax {jax.__version__}, diffrax {diffrax.__version__}, "
           f"load avg {os.getloadavg()[0]:.2f}", flush=True)
-    res = {"date": time.strftime("%Y-%m-%d"), "machine": bl.machine(), "jax": jax.__version__,
-           "diffrax": diffrax.__version__, "load_avg_start": os.getloadavg()}
+    res = bl.header({"sizes": sizes, "repeats": repeats, "accuracy_trajectories": n_acc, "dt_s": bl.DT,
+                     "duration_s": bl.DURATION, "adaptive_rtol": 1e-8, "adaptive_atol": 1e-10,
+                     "reference": "SciPy DOP853 rtol 1e-13 atol 1e-15", "quick": quick}, "diffrax")
 
     # --- references (independent NumPy field, SciPy DOP853 rtol 1e-13): final postures of the first
     # n_acc trajectories of the largest batch; FD gradient of L for the B = 1 trajectory.
@@ -262,9 +270,10 @@ def main(quick):
     tr = pj.simulate(model, planner, q0a.T, xda.T, duration=bl.DURATION, dt=bl.DT, saveat=pj.SaveAt(final=True))
     qs, _ = jax.jit(solve_scan)(p0, q0a, xda)
     res["simulate_vs_scan_max_abs_diff"] = float(np.max(np.abs(np.asarray(tr.q[:, -1]) - np.asarray(qs).T)))
-    res["load_avg_end"] = os.getloadavg()
+    res["load_end"] = bl.load_average()
 
     table = render(res, sizes)
+    res["tables"] = [table]
     print("\n" + table)
     if not quick:
         print(f"\nwrote {bl.write_results('integrators', res)}")
@@ -300,7 +309,7 @@ def render(res, sizes):
     L.append("RK4 (pmpjax scan) error vs dt: " + ", ".join(
         f"{float(k) * 1e3:g} ms → {v:.1e}" for k, v in res["rk4_dt_convergence"].items())
         + f"; pmpjax.simulate vs this scan solver: {res['simulate_vs_scan_max_abs_diff']:.1e}."
-        + f" Load average {res['load_avg_start'][0]:.1f} → {res['load_avg_end'][0]:.1f}.")
+        + f" Load average {res['load_start'][0]:.1f} → {res['load_end'][0]:.1f}.")
     return "\n".join(L)
 
 
