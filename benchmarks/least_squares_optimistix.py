@@ -10,20 +10,28 @@ observed postures of one subject: optimistix by its ``ImplicitAdjoint`` (reverse
 hand-written LM's ``while_loop`` has no reverse mode, so its only route is forward mode through the
 iterations (``jax.jacfwd``, one pass per observed posture coordinate: not attempted at 1 500 inputs).
 
-Usage: ``python benchmarks/least_squares_optimistix.py [--subjects 16] [--repeats 2]``.
+Usage: ``python benchmarks/least_squares_optimistix.py [--subjects 16] [--repeats 2]`` (about 3 min
+on 2 cores); writes ``benchmarks/results/least_squares_optimistix.json`` (date, machine, versions,
+load average, parameters, both solvers' figures and the table).
 
-Latest figures (2026-12-01 18:00–18:25 UTC, 2-core CPU (AMD EPYC, KVM), no GPU, shared machine,
-load average 11.6 at start, 21.7 at the end — absolute times are inflated several-fold, ratios
-hold; optimistix 0.1.0, equinox 0.13.8; 16 subjects)::
+Latest figures (2026-12-06 07:23–07:25 UTC, ``results/least_squares_optimistix.json``; 2-core AMD
+EPYC (Zen 4) KVM, no GPU, JAX 0.10.2, optimistix 0.1.0, equinox 0.13.8, float64; default size, 16
+subjects, 167 s). The machine was shared with other developers' test runs (load average 8.6 at the
+start, 8.2 at the end, on 2 cores), so the times are upper bounds; the ratios are taken within the
+run::
 
-    fitting.least_squares  compile  178.7 s  run  40.09 s   2505.8 ms/subject  median steps  18.5  converged 1.000
-    optimistix LM          compile  324.4 s  run  82.51 s   5156.6 ms/subject  median steps  44.5  converged 1.000
-    best-start cost, max relative difference: 1.85e-15
-    optimistix d q_rest[PS] / d postures (1500 inputs, reverse mode): compile 357.3 s, run 1.014 s;
-        directional -3.265424e-04 vs central difference -3.264766e-04
+    | solver | compile [s] | run [s] | ms/subject | median steps | converged |
+    |---|---:|---:|---:|---:|---:|
+    | fitting.least_squares | 16.5 | 3.09 | 193.3 | 18.5 | 1.000 |
+    | optimistix LM | 36.3 | 11.48 | 717.8 | 44.0 | 1.000 |
 
-Decision (written in ``fitting/_optimise/least_squares.py``): keep the hand-written LM (1.8× faster to compile,
-2.1× faster to run, same optima); optimistix's implicit gradients work but no fit needs them.
+    best-start cost, max relative difference: 1.83e-15
+    optimistix d q_rest[PS] / d postures (1500 inputs, reverse mode): compile 33.6 s, run 0.187 s;
+        directional -3.265424e-04 vs central difference -3.265781e-04
+
+Decision (written in ``fitting/_optimise/least_squares.py``): keep the hand-written LM (2.2× faster
+to compile, 3.7× faster to run, the same optima); optimistix's implicit gradients work but no fit
+needs them.
 """
 
 from __future__ import annotations
@@ -42,7 +50,7 @@ import numpy as np  # noqa: E402
 import optimistix as optx  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _baselines import write_results  # noqa: E402
+import _baselines as bl  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
 from fitting import least_squares  # noqa: E402
@@ -105,8 +113,11 @@ def main():
     ap.add_argument("--repeats", type=int, default=2)
     a = ap.parse_args()
     args = data(a.subjects)
-    res = {"subjects": a.subjects, "postures": N_POST, "starts": N_STARTS, "load_start": os.getloadavg()}
+    res = bl.header({"subjects": a.subjects, "postures": N_POST, "starts": N_STARTS, "max_steps": MAX_STEPS,
+                     "repeats": a.repeats, "noise_deg": 0.5}, "optimistix", "equinox")
     print(f"load average at start: {os.getloadavg()}")
+    lines = ["| solver | compile [s] | run [s] | ms/subject | median steps | converged |",
+             "|---|---:|---:|---:|---:|---:|"]
     for name, f in (("fitting.least_squares", ours), ("optimistix LM", theirs)):
         tc, tr, (x, cost, steps, conv) = timed(f, args, a.repeats)
         best = np.argmin(np.where(np.isfinite(np.asarray(cost)), np.asarray(cost), np.inf), axis=1)
@@ -114,6 +125,8 @@ def main():
         res[name] = dict(compile_s=tc, run_s=tr, ms_per_subject=1e3 * tr / a.subjects,
                          median_steps=float(np.median(steps)), converged=float(np.mean(conv)),
                          best_cost=cbest.tolist())
+        lines.append(f"| {name} | {tc:.1f} | {tr:.2f} | {1e3 * tr / a.subjects:.1f} | {np.median(steps):.1f} | "
+                     f"{np.mean(conv):.3f} |")
         print(f"{name:22s} compile {tc:6.1f} s  run {tr:6.2f} s  {1e3 * tr / a.subjects:7.1f} ms/subject  "
               f"median steps {np.median(steps):5.1f}  converged {np.mean(conv):.3f}")
     c0, c1 = (np.asarray(res[k]["best_cost"]) for k in ("fitting.least_squares", "optimistix LM"))
@@ -141,8 +154,16 @@ def main():
                                            central_difference=float(fd))
     print(f"optimistix d q_rest[PS] / d postures (1500 inputs, reverse mode): compile {tc:.1f} s, run {tr:.3f} s; "
           f"directional {float(jnp.sum(g * d)):.6e} vs central difference {float(fd):.6e}")
-    res["load_end"] = os.getloadavg()
-    print(f"load average at end: {os.getloadavg()}; wrote {write_results('least_squares_optimistix', res)}")
+    res["load_end"] = bl.load_average()
+    gi = res["optimistix_implicit_grad"]
+    lines += ["", f"Best-start cost, max relative difference: {res['max_rel_cost_difference']:.2e}. optimistix "
+                  f"d q_rest[PS] / d postures ({3 * N_POST} inputs, reverse mode): compile {gi['compile_s']:.1f} s, "
+                  f"run {gi['run_s']:.3f} s; directional {gi['directional']:.6e} vs central difference "
+                  f"{gi['central_difference']:.6e}. Load average {res['load_start'][0]:.1f} → "
+                  f"{res['load_end'][0]:.1f}."]
+    res["tables"] = ["\n".join(lines)]
+    print("\n" + res["tables"][0])
+    print(f"load average at end: {os.getloadavg()}; wrote {bl.write_results('least_squares_optimistix', res)}")
 
 
 if __name__ == "__main__":
