@@ -10,35 +10,49 @@ per arm. Compared in the same process, on the same model and inputs (final postu
   multi-threaded ``mujoco.rollout`` with the springs as affine actuators (no compile);
 - ``loop``: the baseline, a single-threaded Python loop of ``mj_step`` writing ``qfrc_applied``.
 
-Run times are the minimum of repeats (``block_until_ready`` for MJX). Run:
-``python benchmarks/primitives_mjx.py [--quick]``; writes ``benchmarks/results/primitives_mjx.json``.
+Run times are the minimum of repeats (``block_until_ready`` for MJX); the Python loop is timed on
+at most 64 arms (once when there are 64) and scaled linearly to B. Run:
+``python benchmarks/primitives_mjx.py [--quick] [--repeats 3]`` (about 2 min on 2 cores; ``--quick``:
+B = 1 and 64); writes ``benchmarks/results/primitives_mjx.json`` (date, machine, versions, load
+average, parameters, one row per batch size and the table).
 
-Latest figures (2026-12-01, 2-core CPU, no GPU, shared with other jobs: load average ≈ 12 at
-start and end, so absolute times are inflated several-fold; ratios are taken in the same run):
-MJX runs the arms at 0.06–0.13× the steps per second of MuJoCo's batch rollout and compiles its
-batch kernel in 48–129 s. That run's table was not kept; a run (≈ 5–10 min) writes it to
-``benchmarks/results/primitives_mjx.json``.
+Latest figures (2026-12-06 07:25–07:27 UTC, ``results/primitives_mjx.json``; 2-core AMD EPYC (Zen 4)
+KVM, no GPU, JAX 0.10.2, MuJoCo 4.0.1, float64; default sizes B = 1, 64, 1 024, 111 s). The machine
+was shared with other developers' test runs (load average 8.1 at the start, 8.0 at the end, on 2
+cores), so the times are upper bounds, and MuJoCo's second thread found no idle core::
 
-Reading: on this CPU the C path wins at every batch size. MuJoCo's batch rollout removes the
-Python overhead of the loop (one ``mj_step`` call per step) and runs the arms on both cores; MJX's
-step for this small arm is dominated by per-op overhead of many tiny kernels and costs a long
-compile. MJX is for what it alone gives: ``jax.grad``/``vmap``/``jit`` through rollouts.
+    | B | steps | Python mj_step loop [s] | C 1 thread [s] | × loop | C 2 threads [s] | × loop | MJX compile [s] | MJX run [s] | × loop | MJX speed / C 2 threads |
+    |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|
+    | 1 | 1000 | 0.005 | 0.008 | 0.58 | 0.008 | 0.57 | 7.7 | 0.025 | 0.19 | 0.34 |
+    | 64 | 64000 | 0.939 | 0.302 | 3.11 | 0.303 | 3.10 | 9.3 | 0.376 | 2.50 | 0.81 |
+    | 1024 | 1024000 | 7.498 | 5.460 | 1.37 | 5.688 | 1.32 | 12.3 | 7.020 | 1.07 | 0.81 |
+
+MJX runs the arms at 0.34–0.81× the steps per second of MuJoCo's batch rollout and compiles its
+batch kernel in 8–12 s. The Python loop's 64-arm figure is a single timing under that load (its
+per-step rate is a third of the one-arm rate), so its ratios carry the load's noise.
+
+Reading: on this CPU MJX is never the fastest. From 64 arms on MuJoCo's batch rollout wins: it
+removes the Python overhead of the loop (one ``mj_step`` call per step) and runs the arms on both
+cores when they are idle; for one arm the plain loop is faster (5 ms against 8 ms: the batch call's
+fixed cost). MJX's step for this small arm is dominated by the per-op overhead of many tiny kernels
+and costs a compile. MJX is for what it alone gives: ``jax.grad``/``vmap``/``jit`` through
+rollouts.
 """
 
+# ruff: noqa: E501  (the pasted result table above)
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import _baselines as bl  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
-from _baselines import write_results  # noqa: E402
 
 import pmpjax as pj  # noqa: E402
 from pmpjax.internal import PROBE_PARK, Scripted, rollout_batch  # noqa: E402
@@ -112,9 +126,11 @@ def main():
     ap.add_argument("--quick", action="store_true", help="batch sizes 1 and 64 only")
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args()
-    load0 = os.getloadavg()
-    arm = pj.load_arm(contacts=False)
     sizes = (1, 64) if a.quick else (1, 64, 1024)
+    out = bl.header({"sizes": list(sizes), "repeats": a.repeats, "steps_per_rollout": STEPS,
+                     "loop_arms_timed": 64, "quick": a.quick})
+    arm = pj.load_arm(contacts=False)
+    out["parameters"]["dt_s"] = arm.dt
     rows = []
     for B in sizes:
         q_set = set_points(B)
@@ -145,16 +161,18 @@ def main():
             f" | C 1 thread {c1_s:8.3f} s {row['c1_steps_per_s']:>10,.0f}/s ×{row['c1_speedup_vs_loop']:.2f}"
             f" | C 2 threads {c2_s:8.3f} s {row['c2_steps_per_s']:>10,.0f}/s ×{row['c2_speedup_vs_loop']:.2f}" + mjx
         )
-    out = dict(
-        date=time.strftime("%Y-%m-%d"),
-        machine="2-core CPU, no GPU (shared)",
-        load_average_start=load0,
-        load_average_end=os.getloadavg(),
-        steps_per_rollout=STEPS,
-        dt=arm.dt,
-        rows=rows,
-    )
-    print("results ->", write_results("primitives_mjx", out))
+    lines = ["| B | steps | Python mj_step loop [s] | C 1 thread [s] | × loop | C 2 threads [s] | × loop | "
+             "MJX compile [s] | MJX run [s] | × loop | MJX speed / C 2 threads |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        mjx = (f"{r['mjx_compile_s']:.1f} | {r['mjx_s']:.3f} | {r['mjx_speedup_vs_loop']:.2f} | "
+               f"{r['c2_s'] / r['mjx_s']:.2f}" if "mjx_s" in r else " | | | ")
+        lines.append(f"| {r['batch']} | {r['steps']} | {r['loop_s']:.3f} | {r['c1_s']:.3f} | "
+                     f"{r['c1_speedup_vs_loop']:.2f} | {r['c2_s']:.3f} | {r['c2_speedup_vs_loop']:.2f} | {mjx} |")
+    out.update(rows=rows, tables=["\n".join(lines)], load_end=bl.load_average())
+    print("\n" + out["tables"][0])
+    print(f"load average {out['load_start'][0]:.1f} -> {out['load_end'][0]:.1f}")
+    print("results ->", bl.write_results("primitives_mjx", out))
 
 
 if __name__ == "__main__":
