@@ -17,9 +17,8 @@ JAX rows: ``compile`` = ``_run.lower(...).compile()`` of the jitted function beh
 (trace+lower reported separately); ``kernel`` = the compiled executable alone; ``call`` = the public
 ``pmpjax.simulate`` (input checks, RK4 stability check, ``block_until_ready``). The kernel is the
 one ``simulate`` runs at that batch size: up to 1 024 movements a compile-light variant (RK4 stages
-in a loop, XLA's legacy emitters; ``simulate_module._primal_run``), above it the unrolled one (the
-B = 1/100/1 000 rows of the table below were measured on the unrolled kernel). Times are the
-minimum of several repeats (the machine is shared). Rates use the ``call`` time.
+in a loop, XLA's legacy emitters; ``simulate_module._primal_run``), above it the unrolled one.
+Times are the minimum of several repeats (the machine is shared). Rates use the ``call`` time.
 
 Peak memory, per batch size in a fresh subprocess: ``xla`` = argument + output + temp buffers of the
 compiled executable (``compiled.memory_analysis()``, exact); ``Δrss`` = growth of the resident set
@@ -41,58 +40,66 @@ is timed in the same rounds (``× C loop``). Rows are interleaved so that they s
 load; the CPU column is less sensitive to it than wall time. The rows are then repeated in a child
 process started with ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` (huge pages for large ``malloc``s).
 
-Run: ``python benchmarks/simulate.py`` (≈ 4–8 min), ``--saves`` (save modes only, ≈ 3 min at
-load 1, 6 under load; ``--saves-B``), or ``--quick`` (smoke run, writes nothing).
+Run: ``python benchmarks/simulate.py`` (≈ 3–8 min), ``--saves`` (save modes only, ≈ 3 min at
+load 1, 6 under load; ``--saves-B``), or ``--quick`` (smoke run, writes nothing). The default run
+writes ``benchmarks/results/simulate.json`` and ``--saves`` ``benchmarks/results/simulate_saves.json``
+(date, machine, versions, load average, parameters, the rows and the tables).
 
-Results (2026-11-22 10:20 UTC, quiet machine, 2-core AMD EPYC (Zen 4, KVM), no GPU, jax 0.10.2, float64):
+Latest figures (2026-12-06 07:27–07:30 UTC, ``results/simulate.json``; 2-core AMD EPYC (Zen 4) KVM,
+no GPU, JAX 0.10.2, float64; default sizes, 202 s). The machine was shared with other developers'
+test runs (load average 8.0 at the start, 5.7 at the end, on 2 cores): every time is an upper
+bound, and the ratios carry that load's noise:
 
 | implementation | B | save | compile [s] | time/call | steps/s | traj/s | xla mem | Δrss | maxrss |
 |---|---:|---|---:|---:|---:|---:|---:|---:|---:|
-| JAX simulate, 1 device | 1 | final | 0.19+0.91 | 1.94 ms (kernel 1.03) | 207 k | 517 | 6 kB | 48 kB | 759.7 MB |
-| JAX simulate, 1 device | 100 | final | 0.27+1.85 | 11.34 ms (kernel 9.60) | 3.53 M | 8.82 k | 71 kB | 112 kB | 759.7 MB |
-| JAX simulate, 1 device | 1000 | final | 0.29+1.95 | 100.44 ms (kernel 99.56) | 3.98 M | 9.96 k | 669 kB | 744 kB | 759.7 MB |
-| JAX simulate, 1 device | 10000 | final | 0.19+1.56 | 786.16 ms (kernel 732.52) | 5.09 M | 12.7 k | 6.5 MB | 6.4 MB | 759.7 MB |
-| JAX simulate, 1 device | 10000 | every10 | 0.63+3.20 | 734.01 ms (kernel 722.72) | 5.45 M | 13.6 k | 58.2 MB | 61.2 MB | 759.7 MB |
-| JAX simulate, taskset 1 core | 10000 | final | | 1063.8 ms (kernel 1067.6) | 3.76 M | | | | |
-| JAX simulate, 2 devices (gspmd) | 10000 | final | | 505.1 ms (gspmd 505, shard_map 534) | 7.92 M | 19.8 k | | | |
-| C scalar loop (gcc -O3 -march=native), 1 core | 10000 | final | | 958.4 ms | 4.17 M | 10.4 k | | | |
-| numba scalar loop, 1 core | 10000 | final | 1.90 | 1022.0 ms | 3.91 M | 9.78 k | | | |
-| SciPy solve_ivp DOP853 loop (rtol 1e-6) | 20 | final | | 196 ms | (249 evals/traj) | 102 | | | |
+| JAX simulate, 1 device | 1 | final | 0.55+1.26 | 1.98 ms (kernel 1.16) | 202 k | 505 | 5 kB | 52 kB | 614.2 MB |
+| JAX simulate, 1 device | 100 | final | 0.43+1.91 | 10.78 ms (kernel 9.62) | 3.71 M | 9.27 k | 69 kB | 100 kB | 614.2 MB |
+| JAX simulate, 1 device | 1000 | final | 0.25+1.36 | 150.59 ms (kernel 145.68) | 2.66 M | 6.64 k | 645 kB | 1.2 MB | 614.2 MB |
+| JAX simulate, 1 device | 10000 | final | 0.27+4.39 | 1881.87 ms (kernel 2226.68) | 2.13 M | 5.31 k | 5.9 MB | 7.3 MB | 614.2 MB |
+| JAX simulate, 1 device | 10000 | every10 | 0.75+6.23 | 2156.82 ms (kernel 1634.91) | 1.85 M | 4.64 k | 48.4 MB | 50.0 MB | 614.2 MB |
+| JAX simulate, taskset 1 core | 10000 | final | | 2015.2 ms (kernel 1603.1) | 1.98 M | | | | |
+| JAX simulate, 2 devices (shard_map) | 10000 | final | | 1539.6 ms (gspmd 1570, shard_map 1540) | 2.6 M | 6.49 k | | | |
+| C scalar loop (gcc -O3 -march=native), 1 core | 10000 | final | | 867.0 ms | 4.61 M | 11.5 k | | | |
+| numba scalar loop, 1 core | 10000 | final | 1.23 | 1618.0 ms | 2.47 M | 6.18 k | | | |
+| SciPy solve_ivp DOP853 loop (rtol 1e-6) | 20 | final | | 492 ms | (249 evals/traj) | 40.6 | | | |
 
 Agreement of final postures with JAX (max |Δq| [rad]): scipy 1.1e-08, c 1.4e-16, numba 1.5e-16, 2-device 0.0e+00; closed-form vs generator-form Jacobian 1.1e-16.
-Ratios at B = 10000: JAX/SciPy trajectories/s = 125× (target ≥ 100×); JAX/C steps/s: 1 device 1.22, pinned 1 core 0.90, 2 devices 1.90 (target ≥ 0.5). Load average 2.1 → 1.6.
+Ratios at B = 10000: JAX/SciPy trajectories/s = 131× (target ≥ 100×); JAX/C steps/s: 1 device 0.46, pinned 1 core 0.43, 2 devices 0.56 (target ≥ 0.5). Load average 8.0 → 5.7.
 
-Reading it: at B = 10 000 one device runs 1.22× the C loop's steps/s (kernel 1.31×); pinned to
-one core 0.90×; split over the two cores 1.90×. SciPy does 102 trajectories/s; JAX/SciPy = 125×.
-At B = 1 half of the 1.9 ms call is Python-side checks (kernel 1.0 ms). Saving every 10 steps
-costs 58 MB of XLA buffers instead of 6.5 MB.
+Reading it: under this load one device runs 0.46× the C loop's steps/s at B = 10 000, pinned to
+one core 0.43×, split over the two (busy) cores 0.56×; the 0.5 target is met only by the 2-device
+row. SciPy does 41 trajectories/s; JAX/SciPy = 131× (target ≥ 100×: met). At B = 1 the 2.0 ms call
+is 1.2 ms of kernel and 0.8 ms of Python-side checks. Saving every 10 steps costs 48 MB of XLA
+buffers instead of 5.9 MB.
 
-Save modes (``--saves --saves-repeats 9``), latest: 2026-12-04 19:00 UTC, idle (load 1.2 → 1.7),
-2-core AMD EPYC (Zen 4, KVM), jax 0.10.2. ``× final, paired`` = the median over the 9 rounds of the
-row's time over the final-only call's in the same round (the ratio of minima moves by ±10 % with
-the background load of this VM; the paired median by about ±0.05):
+Save modes (``--saves``, 3 interleaved rounds; 2026-12-06 07:37–07:40 UTC,
+``results/simulate_saves.json``; same machine, JAX 0.10.2; load average 5.2 at the start, 6.1 at
+the end, on 2 cores: times are upper bounds, and JAX's CPU time per call equals its wall time, i.e.
+it got about one core). ``× final, paired`` = the median over the rounds of the row's time over the
+final-only call's in the same round (robust to the load drifting between rounds):
 
 | default allocator (B = 10000) | save | compile [s] | time/call | CPU/call | steps/s | × final (wall, CPU) | × final, paired | × C loop | page faults |
 |---|---|---:|---:|---:|---:|---:|---:|---:|---:|
-| final | final | 3.6 | 735 ms | 1385 ms | 5.44 M | 1.00, 1.00 | 1.00 | 1.27 | 0 k |
-| every step | every step | 3.5 | 1102 ms | 1874 ms | 3.63 M | 1.50, 1.35 | 1.43 | 0.85 | 78 k |
-| every 10 | every 10 | 4.7 | 701 ms | 1297 ms | 5.71 M | 0.95, 0.94 | 0.99 | 1.33 | 0 k |
-| ts (40) | ts (40) | 4.2 | 718 ms | 1324 ms | 5.57 M | 0.98, 0.96 | 1.03 | 1.30 | 0 k |
-| loss, batched call (jit) | every step | 3.2 | 759 ms | 1399 ms | 5.27 M | 1.03, 1.01 | 1.03 | 1.23 | 18 k |
-| loss, vmap of single calls (jit) | every step | 3.7 | 748 ms | 1353 ms | 5.35 M | 1.02, 0.98 | 1.02 | 1.25 | 18 k |
-| C scalar loop, 1 core | final |  | 934 ms | 934 ms | 4.28 M | 1.27, 0.67 | 1.22 | 1.00 | 0 k |
+| final | final | 5.6 | 1296 ms | 1278 ms | 3.09 M | 1.00, 1.00 | 1.00 | 0.69 | 0 k |
+| every step | every step | 7.1 | 2025 ms | 1846 ms | 1.97 M | 1.56, 1.44 | 1.56 | 0.44 | 79 k |
+| every 10 | every 10 | 3.7 | 1307 ms | 1308 ms | 3.06 M | 1.01, 1.02 | 1.02 | 0.69 | 0 k |
+| ts (40) | ts (40) | 2.9 | 1318 ms | 1317 ms | 3.03 M | 1.02, 1.03 | 1.05 | 0.68 | 0 k |
+| loss, batched call (jit) | every step | 2.4 | 1359 ms | 1357 ms | 2.94 M | 1.05, 1.06 | 1.08 | 0.66 | 18 k |
+| loss, vmap of single calls (jit) | every step | 2.8 | 1321 ms | 1331 ms | 3.03 M | 1.02, 1.04 | 1.02 | 0.68 | 18 k |
+| C scalar loop, 1 core | final |  | 898 ms | 869 ms | 4.46 M | 0.69, 0.68 | 0.69 | 1.00 | 0 k |
 
-With ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` in the same run: every step 1.79× / 1.85× paired
-(2 k page faults), the other rows 0.93–1.08×: huge pages did not help in this run.
+With ``GLIBC_TUNABLES=glibc.malloc.hugetlb=1`` in the same run (the child process, under the same
+load): every step 1.84× paired (3 k page faults instead of 79 k), the other rows 1.01–1.04×.
 
-Reading it: every mode but every-step saving is within 1.1× of the final-only call and at or above
-the C loop (1.23–1.33×); every-step saving is 1.43× the final-only call and 0.85× the C loop (the
-1.3× target is not met). Inside a caller's plain ``jax.jit`` above 16 movements ``simulate`` takes
-the unrolled kernel (a caller's ``pj.fast_compile_jit``, whose compile options apply, keeps the
-compile-light one), so a jitted loss runs as fast as the public call.
+Reading it: every mode but every-step saving is within 1.1× of the final-only call (paired
+1.02–1.08); every-step saving is 1.56× the final-only call (the 1.3× target is not met). Under this
+load the C loop, which needs one core only, is 1.45× faster than the final-only call. Inside a caller's plain
+``jax.jit`` above 16 movements ``simulate`` takes the unrolled kernel (a caller's
+``pj.fast_compile_jit``, whose compile options apply, keeps the compile-light one), so a jitted
+loss runs as fast as the public call.
 
 Where the every-step time goes, by XLA's own CPU profiler (``jax.profiler.trace(...,
-create_perfetto_trace=True)``, one call after warm-up, B = 10 000; the event durations summed per
+create_perfetto_trace=True)``, one call after warm-up, B = 10 000, idle machine; the event durations summed per
 fused loop): the field's fused loops take the same ≈ 510–630 ms in both calls. On top of them the
 every-step call spends 166 ms in the block writes (five in-place ``dynamic-update-slice`` loops per
 16 samples, 1–2 ms each, run one after the other on one thread: XLA:CPU splits loop fusions over
@@ -331,9 +338,10 @@ def main(quick):
     n_scipy = 4 if quick else 20
     print(f"pmpjax simulate benchmark — {bl.machine()}, jax {jax.__version__}, "
           f"load avg {os.getloadavg()[0]:.2f}", flush=True)
-    res = {"date": time.strftime("%Y-%m-%d"), "machine": bl.machine(), "jax": jax.__version__,
-           "load_avg_start": os.getloadavg(), "problem": "Figure 3 wrist λ0-PMP, 0.4 s, dt 1 ms RK4, float64",
-           "jacobian_closed_vs_generator_form": bl.check_jacobian()}
+    res = bl.header({"sizes": sizes, "repeats": repeats, "scipy_trajectories": n_scipy, "dt_s": bl.DT,
+                     "duration_s": bl.DURATION, "quick": quick}, "numba")
+    res.update(problem="Figure 3 wrist λ0-PMP, 0.4 s, dt 1 ms RK4, float64",
+               jacobian_closed_vs_generator_form=bl.check_jacobian())
 
     # --- JAX, default single CPU device, in this process
     rows, finals = [], {}
@@ -391,7 +399,7 @@ def main(quick):
     par["sharded_2dev"]["max_abs_diff_vs_single_device"] = float(np.max(np.abs(np.load(npy) - qJ)))
     os.remove(npy)
     res["parallel"] = par
-    res["load_avg_end"] = os.getloadavg()
+    res["load_end"] = bl.load_average()
 
     # --- ratios (rates from the public simulate call)
     jb = next(r for r in rows if r["B"] == big and r["save"] == "final")
@@ -405,6 +413,7 @@ def main(quick):
     res["ratios"] = ratios
 
     table = render(res, big)
+    res["tables"] = [table]
     print("\n" + table)
     if not quick:
         print(f"\nwrote {bl.write_results('simulate', res)}")
@@ -453,7 +462,7 @@ def render(res, big):
                 f"; JAX/C steps/s: 1 device {r['jax_1device_vs_c_1core']:.2f}, "
                 + (f"pinned 1 core {r['jax_pinned_1core_vs_c_1core']:.2f}, " if "jax_pinned_1core_vs_c_1core" in r else "")
                 + f"2 devices {r['jax_2devices_vs_c_1core']:.2f} (target ≥ 0.5)")
-             + f". Load average {res['load_avg_start'][0]:.1f} → {res['load_avg_end'][0]:.1f}.")
+             + f". Load average {res['load_start'][0]:.1f} → {res['load_end'][0]:.1f}.")
     return "\n".join(L)
 
 
@@ -550,14 +559,12 @@ def main_saves(B, repeats, out, child=False):
     whose large allocations use transparent huge pages (``GLIBC_TUNABLES=glibc.malloc.hugetlb=1``,
     glibc ≥ 2.35): XLA's CPU buffers come from ``malloc``, so the fresh every-step output then costs
     hundreds instead of ~90 k page faults."""
-    load0 = os.getloadavg()
+    head = bl.header({"B": B, "repeats": repeats, "glibc_tunables": os.environ.get("GLIBC_TUNABLES", "")})
+    load0 = head["load_start"]
     print(f"pmpjax simulate save modes — B = {B}, {bl.machine()}, jax {jax.__version__}, load {load0[0]:.2f}, "
           f"GLIBC_TUNABLES={os.environ.get('GLIBC_TUNABLES', '')!r}", flush=True)
     rows, diff = bench_saves(B, repeats)
-    res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": bl.machine(),
-           "jax": jax.__version__, "B": B, "pmpjax": os.path.dirname(pj.__file__), "rows": rows,
-           "glibc_tunables": os.environ.get("GLIBC_TUNABLES", ""),
-           "max_abs_diff_vmap_vs_batched_loss": diff, "load_avg_start": load0, "load_avg_end": os.getloadavg()}
+    res = {**head, "rows": rows, "max_abs_diff_vmap_vs_batched_loss": diff, "load_end": bl.load_average()}
     if child:
         return res
     L = _saves_table(B, rows, "default allocator")
@@ -569,9 +576,10 @@ def main_saves(B, repeats, out, child=False):
         with open(tmp) as f:
             res["hugepages"] = json.load(f)
         L += ["", *_saves_table(B, res["hugepages"]["rows"], "huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1)")]
-        res["load_avg_end"] = os.getloadavg()
+        res["load_end"] = bl.load_average()
     L.append(f"\nvmap-of-single-calls loss vs batched loss: max |Δ| = {diff:.1e}. "
-             f"Load average {load0[0]:.1f} → {res['load_avg_end'][0]:.1f}.")
+             f"Load average {load0[0]:.1f} → {res['load_end'][0]:.1f}.")
+    res["tables"] = ["\n".join(L)]
     print("\n" + "\n".join(L))
     if out == "default":
         print(f"wrote {bl.write_results('simulate_saves', res)}")
