@@ -507,11 +507,15 @@ def test_time_constants_recover_the_generating_values(analysis, experiment, monk
     tc = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"])
     assert tc.converged.all() and tc.tau0.shape == (2,) and tc.solver == "rk4"
     # "Converged" stops at the optimum: the Gauss–Newton step from the stopping point (NumPy, on the
-    # fit's residual and Jacobian there) is below 0.1 of the standard error of every log time constant.
+    # fit's residual and Jacobian there, one subject at a time) is below 0.05 of every log time
+    # constant's Gauss–Newton standard error (σ² (JᵀJ)⁻¹, the unit of the statistical tolerance's
+    # promise of 0.014; measured 0.0035; the reported, clustered errors are about 3 times larger).
     (jac, r), = seen
-    step = np.linalg.solve(np.einsum("bki,bkj->bij", jac, jac), -np.einsum("bki,bk->bi", jac, r))
-    in_se = np.abs(step) / (tc.stderr / np.c_[tc.tau0, tc.tau])
-    assert np.all(in_se < 0.1), in_se
+    H = np.einsum("bki,bkj->bij", jac, jac)
+    step = np.linalg.solve(H, -np.einsum("bki,bk->bi", jac, r)[..., None])[..., 0]
+    sigma2 = np.einsum("bk,bk->b", r, r) / (r.shape[1] - 2)
+    in_se = np.abs(step) / np.sqrt(sigma2[:, None] * np.diagonal(np.linalg.inv(H), axis1=1, axis2=2))
+    assert in_se.shape == (2, 2) and np.all(in_se < 0.05), in_se
     # Generated with τ0 = 0.3 T, τ = 0.12 T (one T per subject), not the paper's T/5.
     np.testing.assert_allclose(tc.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(tc.tau, tr["tau"][:, 0], rtol=0.05)

@@ -396,6 +396,26 @@ def test_held_out_repetitions_never_enter_the_fit(folders, clean_fit, monkeypatc
     assert a.q_obs.shape == b.q_obs.shape and not np.allclose(a.q_obs, b.q_obs)
 
 
+def test_reported_standard_errors_are_the_delta_method_s(folders, clean_fit):
+    # fit_reaching's stderr and cov (not only _fit_motions'): σ² (JᵀJ)⁻¹ in NumPy at the reported
+    # parameters, σ² = |r|²/(n − p) over the 12 motions' residuals, from the residual and Jacobian
+    # there (the compiled stage 2 with no iteration; its Jacobian is checked against central
+    # differences above).
+    m = rmotions._motions(2, folders["clean"], SMALL["reps"], SMALL["tasks"])
+    cfg = rmodel._Config(clean_fit.model, clean_fit.damping, clean_fit.time_constants, 5,
+                         cond_max=clean_fit.stiffness_cond_max)
+    assert len(m) == clean_fit.n_motions[0] == 12
+    at = rfit._fit_motions([m], cfg, theta0=clean_fit.params, keep_jac=True, max_steps=(0, 0),
+                           steps=clean_fit.steps_per_sample, solver=clean_fit.solver)
+    J, r = at["jac"][0], at["residual"][0]
+    n, p = 12 * (49 * 4 + 4), J.shape[1]
+    assert clean_fit.n_residuals[0] == n
+    np.testing.assert_allclose(0.5 * r @ r, clean_fit.loss[0], rtol=1e-10)
+    cov = r @ r / (n - p) * np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(clean_fit.stderr[0], np.sqrt(np.diag(cov)), rtol=1e-6)
+    np.testing.assert_allclose(clean_fit.cov[0], cov, rtol=1e-6, atol=1e-9 * np.abs(cov).max())
+
+
 def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
     pr = fitting.predict_reaching(clean_fit, reps=(8, 9, 10))
     N = len(pr.task)
