@@ -445,6 +445,11 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
         x_all = np.asarray(out["x"][i])
         x = x_all[:p]
         params[a], cov[a] = x, np.asarray(out["cov"][i])[:p, :p]
+        if out["residual"] is not None:
+            # ``covariance`` divides by N − p over the padded residual; the padding reaches' rows
+            # are not data (their nuisance columns and prior rows cancel in N − p)
+            dof = np.asarray(out["residual"][i]).size - x_all.size
+            cov[a] *= dof / max(dof - (out["B"] - len(usable[s])) * (SAMPLES * n), 1)
         k_nu = mdl.n_nuisance(cfg)
         nuis = x_all[p:].reshape(-1, k_nu)[: len(usable[s])] if x_all.size > p else np.zeros((len(usable[s]), 0))
         offsets = nuis[:, 0] if mdl.reach_delays(cfg) and nuis.shape[1] else np.zeros(0)
