@@ -37,7 +37,8 @@ cond ≤ 11), ``q_rest`` (±8° around (25, 12, 25, 68, 5)°), ``τ0`` ∈ [0.09
    S (compilation included), and run time per stage-2 Levenberg–Marquardt iteration summed over
    the subjects (how hard each subject was to fit taken out).
 3. **Kinematics** (``kinematics``, in this process): ``pj.MjcfChain(arm5.xml, "hand")`` (site
-   kinematics unrolled along the path from the world, ``pmpjax._chains.serial``) against a
+   kinematics unrolled with the model's constants and evaluated from the site towards the world on
+   vectors, each hinge about a coordinate axis a plane rotation, ``pmpjax._chains.serial``) against a
    hand-written ``pj.Chain`` subclass with the same arm's forward kinematics and Jacobian in
    closed form (each sine and cosine once through pmpjax's ``sincos``, as the library's
    closed-form chains; written here from the XML's axes and offsets, checked against MjcfChain
@@ -52,9 +53,10 @@ cond ≤ 11), ``q_rest`` (±8° around (25, 12, 25, 68, 5)°), ``τ0`` ∈ [0.09
    simulation of 24 reaches with respect to 22 parameters (q_rest, a symmetric change of KJ, log τ,
    log τ0: stage 2's work per iteration on one subject of 20 reaches). Compile = ``jax.jit(f).lower``
    + ``.compile()``; run = the fastest of repeated calls of the compiled function
-   (``block_until_ready``), the three chains interleaved round by round (7 rounds) so that they see
-   the same load; the outputs of the three chains are compared. Ratios: each chain / closed form,
-   compile and run apart.
+   (``block_until_ready``; 3 calls a round for the kernels, 10 for simulate at 24 reaches, 1 at
+   256, 2 for jacfwd), the three chains interleaved round by round (7 rounds) so that they see the
+   same load, and the median over the rounds of each round's fastest call; the outputs of the three
+   chains are compared. Ratios: each chain / closed form, compile and run apart.
 
 ``os.getloadavg()`` is recorded before and after each part: the machine is shared, and times
 taken under load are upper bounds. ``--quick``: tiny sizes (2 subjects × 4 reaches with 2 held
@@ -116,33 +118,43 @@ Batch scaling, 6 reaches per subject, steps held at 2::
     and stops at the iteration cap with τ = 7e-8 s and 0.35° — in a batch, every subject would
     repeat those rounds.
 
-Kinematics (load 5.1 → 4.3)::
+Kinematics (2026-12-06 07:50 UTC, the same machine, this part alone with ``--parts kinematics``; load
+4.01 → 5.72; JVPs: the derivative along each joint; simulate: RODAS4; jacfwd: 22 parameters;
+compile: lower + XLA; ratios: the chain / closed form)::
 
-    | workload | chain | compile [s] (lower + XLA) | run | compile / closed form | run / closed form |
-    |---|---|---:|---:|---:|---:|
-    | fk_jac_soa, 10000 postures | closed form | 0.05 + 0.52 | 0.65 ms |  |  |
-    | fk_jac_soa, 10000 postures | MjcfChain | 0.13 + 0.90 | 1.63 ms | 1.83 | 2.51 |
-    | fk_jac_soa, 10000 postures | MJX-style | 0.03 + 0.98 | 4.74 ms | 1.79 | 7.32 |
-    | fk_jac_soa + derivative along each joint, 10000 postures | closed form | 0.07 + 1.20 | 3.48 ms |  |  |
-    | fk_jac_soa + derivative along each joint, 10000 postures | MjcfChain | 0.15 + 2.72 | 7.19 ms | 2.25 | 2.07 |
-    | fk_jac_soa + derivative along each joint, 10000 postures | MJX-style | 0.21 + 1.47 | 20.92 ms | 1.32 | 6.01 |
-    | simulate rodas4, 24 reaches | closed form | 1.45 + 12.79 | 16.71 ms |  |  |
-    | simulate rodas4, 24 reaches | MjcfChain | 1.62 + 20.77 | 62.16 ms | 1.57 | 3.72 |
-    | simulate rodas4, 24 reaches | MJX-style | 1.87 + 20.61 | 31.86 ms | 1.58 | 1.91 |
-    | simulate rodas4, 256 reaches | closed form | 1.38 + 17.32 | 382.72 ms |  |  |
-    | simulate rodas4, 256 reaches | MjcfChain | 2.01 + 17.63 | 737.34 ms | 1.05 | 1.93 |
-    | simulate rodas4, 256 reaches | MJX-style | 1.05 + 23.99 | 389.37 ms | 1.34 | 1.02 |
-    | jacfwd of simulate (22 parameters), 24 reaches | closed form | 6.25 + 41.63 | 386.47 ms |  |  |
-    | jacfwd of simulate (22 parameters), 24 reaches | MjcfChain | 6.45 + 54.58 | 710.68 ms | 1.27 | 1.84 |
-    | jacfwd of simulate (22 parameters), 24 reaches | MJX-style | 6.01 + 41.56 | 641.24 ms | 0.99 | 1.66 |
+    | workload | chain | compile [s] | run [ms] | median [ms] | compile ratio | run ratio | median ratio |
+    |---|---|---:|---:|---:|---:|---:|---:|
+    | fk_jac_soa, 10⁴ postures | closed form | 0.02 + 0.27 | 0.35 | 0.85 |  |  |  |
+    | fk_jac_soa, 10⁴ postures | MjcfChain | 0.02 + 0.22 | 0.51 | 0.66 | 0.81 | 1.46 | 0.78 |
+    | fk_jac_soa, 10⁴ postures | MJX-style | 0.03 + 0.50 | 3.26 | 3.36 | 1.82 | 9.29 | 3.96 |
+    | fk_jac_soa + JVPs, 10⁴ postures | closed form | 0.07 + 0.63 | 1.64 | 1.79 |  |  |  |
+    | fk_jac_soa + JVPs, 10⁴ postures | MjcfChain | 0.06 + 0.58 | 1.87 | 1.92 | 0.91 | 1.14 | 1.07 |
+    | fk_jac_soa + JVPs, 10⁴ postures | MJX-style | 0.17 + 0.65 | 11.85 | 12.18 | 1.18 | 7.21 | 6.81 |
+    | simulate, 24 reaches | closed form | 1.22 + 6.09 | 13.70 | 14.71 |  |  |  |
+    | simulate, 24 reaches | MjcfChain | 1.06 + 6.41 | 13.74 | 15.83 | 1.02 | 1.00 | 1.08 |
+    | simulate, 24 reaches | MJX-style | 1.34 + 9.30 | 26.77 | 30.17 | 1.45 | 1.95 | 2.05 |
+    | simulate, 256 reaches | closed form | 1.16 + 6.68 | 283.29 | 283.90 |  |  |  |
+    | simulate, 256 reaches | MjcfChain | 1.09 + 6.59 | 282.29 | 283.72 | 0.98 | 1.00 | 1.00 |
+    | simulate, 256 reaches | MJX-style | 1.24 + 8.96 | 340.07 | 342.30 | 1.30 | 1.20 | 1.21 |
+    | jacfwd of simulate, 24 reaches | closed form | 4.67 + 31.32 | 385.20 | 395.33 |  |  |  |
+    | jacfwd of simulate, 24 reaches | MjcfChain | 5.46 + 72.42 | 378.50 | 383.98 | 2.16 | 0.98 | 0.97 |
+    | jacfwd of simulate, 24 reaches | MJX-style | 6.77 + 50.49 | 629.06 | 644.32 | 1.59 | 1.63 | 1.63 |
 
-    x and J agree with the closed form to 2.2e-16 (MjcfChain) and 2.8e-16 (MJX-style), the
-    simulated trajectories and their Jacobians to ≤ 9e-16 rad; all 256 reaches SUCCESSFUL. Alone,
-    MjcfChain's kernel takes 2.5× the closed form's time (2.1× with its derivative) and is 2.9×
-    faster than the MJX-style kernel. Inside the integrator the order turns: simulate with RODAS4
-    costs 3.7× the closed form at 24 reaches and 1.9× at 256 with MjcfChain, 1.9× and 1.0× with
-    the MJX-style chain; the forward-mode Jacobian (stage 2's work per iteration) 1.84× against
-    1.66×. Compilation: 1.0–1.8× the closed form's (2.2× for the kernel with its derivative).
+    x and J agree with the closed form to 1.1e-16 (MjcfChain) and 2.8e-16 (MJX-style), the simulated
+    trajectories to ≤ 8.9e-16 rad and their Jacobians to 2.7e-16; all 256 reaches SUCCESSFUL.
+    MjcfChain costs what the closed form costs: in ``pj.simulate`` with RODAS4 1.00× at 24 reaches
+    (median over the rounds 1.08×) and 1.00× at 256, the forward-mode Jacobian of the simulation
+    (stage 2's work per iteration) 0.98×, the kernel with its derivative along each joint 1.14×
+    (median 1.07×); compilation 0.8–1.0× the closed form's (2.2× for jacfwd in this run, 1.02× in
+    the run before). The kernel alone reads 1.46× here from one fast round of the closed form (0.35
+    ms; its other rounds 0.44–1.28 ms, MjcfChain's 0.51–0.89 ms); its median is 0.78×. The run
+    before (07:39 UTC, load 5.6 → 4.7) gave 0.96, 0.90, 0.98, 0.72 and 0.98 (fastest calls) and
+    0.90, 1.01, 0.96, 1.02 and 0.97 (medians) for the five workloads. The MJX-style chain stays
+    1.6–2.0× at 24 reaches and in jacfwd. The previous form of MjcfChain, which built the world
+    frames as 3×3 products from the world out with five separate ``sincos`` calls and flattened its
+    MJX model node by node in every jitted call (≈ 0.4 ms a call; the model's arrays as one tuple of
+    leaves take ≈ 0.03 ms), measured 2.51× for the kernel, 3.72× and 1.93× in simulate at 24 and 256
+    reaches and 1.84× in jacfwd (2026-12-06 03:49 UTC, load 5.1 → 4.3).
 """
 
 from __future__ import annotations
@@ -538,7 +550,8 @@ def part_kinematics(args) -> dict:
               "MJX-style": MjxPathChain(mjx_model=mj.mjx_model, site_id=mj.site_id, n=mj.n)}
     lo, hi = np.deg2rad(np.array(RANGES_DEG, float)).T
     qc = jnp.asarray(np.random.default_rng(SEED).uniform(lo, hi, (N, 5)).T)  # (n, N)
-    out = dict(postures=N, reaches=B, jacobian_reaches=Bj, load_start=load())
+    out = dict(date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=bl.machine(), postures=N,
+               reaches=B, jacobian_reaches=Bj, rounds=rounds, load_start=load())
 
     # agreement first (x and J at every posture)
     fk = jax.jit(lambda c, q: c.fk_jac_soa(q))
@@ -583,9 +596,9 @@ def part_kinematics(args) -> dict:
     work = [("fk_jac_soa", f"{N} postures", lambda c, q: c.fk_jac_soa(q), (qc,), 3),
             ("fk_jac_soa + derivative along each joint", f"{N} postures", fk_lin, (qc,), 3)]
     if not args.quick:
-        work += [("simulate rodas4", f"{Bj} reaches", sim, (theta, q0[:Bj], targets[:Bj]), 3),
+        work += [("simulate rodas4", f"{Bj} reaches", sim, (theta, q0[:Bj], targets[:Bj]), 10),
                  ("simulate rodas4", f"{B} reaches", sim, (theta, q0, targets), 1),
-                 ("jacfwd of simulate (22 parameters)", f"{Bj} reaches", jac, (theta, q0[:Bj], targets[:Bj]), 1)]
+                 ("jacfwd of simulate (22 parameters)", f"{Bj} reaches", jac, (theta, q0[:Bj], targets[:Bj]), 2)]
     res = {}
     for wname, size, f, a, reps in work:
         comp = {}
@@ -612,9 +625,11 @@ def part_kinematics(args) -> dict:
                                              for name, c in comp.items()})
         base = res[key]["chains"]["closed form"]
         for name, r in res[key]["chains"].items():
+            r["median_run_s"] = float(np.median(r["runs_s"]))
             if name != "closed form":
                 r["compile_ratio"] = (r["lower_s"] + r["compile_s"]) / (base["lower_s"] + base["compile_s"])
                 r["run_ratio"] = r["run_s"] / base["run_s"]
+                r["median_run_ratio"] = r["median_run_s"] / float(np.median(base["runs_s"]))
         log(f"  {key}: run " + ", ".join(f"{n} {v['run_s'] * 1e3:.2f} ms" for n, v in res[key]["chains"].items()))
     out["workloads"] = res
     out["load_end"] = load()
@@ -671,14 +686,29 @@ def table_scaling(rows) -> str:
     return "\n".join(lines)
 
 
+#: shorter workload names for the table (the results file keeps the full ones)
+_SHORT = {"fk_jac_soa + derivative along each joint": "fk_jac_soa + JVPs", "simulate rodas4": "simulate",
+          "jacfwd of simulate (22 parameters)": "jacfwd of simulate", "10000 postures": "10⁴ postures"}
+
+
 def table_kinematics(k) -> str:
-    lines = ["| workload | chain | compile [s] (lower + XLA) | run | compile / closed form | run / closed form |",
-             "|---|---|---:|---:|---:|---:|"]
+    """compile: lower + XLA [s]; run: the fastest call [ms]; median: the median over the rounds of
+    each round's fastest call [ms]; ratios: MjcfChain or MJX-style / closed form."""
+    lines = ["| workload | chain | compile [s] | run [ms] | median [ms] | compile ratio | run ratio | median ratio |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
     for wname, res in k["workloads"].items():
+        label = wname
+        for a, b in _SHORT.items():
+            label = label.replace(a, b)
         for name, r in res["chains"].items():
-            ratio = ("", "") if name == "closed form" else (f"{r['compile_ratio']:.2f}", f"{r['run_ratio']:.2f}")
-            lines.append(f"| {wname} | {name} | {r['lower_s']:.2f} + {r['compile_s']:.2f} | "
-                         f"{r['run_s'] * 1e3:.2f} ms | {ratio[0]} | {ratio[1]} |")
+            med = float(np.median(r["runs_s"]))
+            if name == "closed form":
+                ratio = ("", "", "")
+            else:
+                base = float(np.median(res["chains"]["closed form"]["runs_s"]))
+                ratio = (f"{r['compile_ratio']:.2f}", f"{r['run_ratio']:.2f}", f"{med / base:.2f}")
+            lines.append(f"| {label} | {name} | {r['lower_s']:.2f} + {r['compile_s']:.2f} | "
+                         f"{r['run_s'] * 1e3:.2f} | {med * 1e3:.2f} | {ratio[0]} | {ratio[1]} | {ratio[2]} |")
     return "\n".join(lines)
 
 
@@ -780,7 +810,9 @@ def summarise(res) -> None:
             targets[key + " (compile + run)"] = 1.0
     k = res.get("kinematics")
     if k:
-        tables.append(f"Kinematics (this process; load {k['load_start']}→{k['load_end']}):\n\n" + table_kinematics(k))
+        when = f"{k['date']}, " if "date" in k else ""
+        tables.append(f"Kinematics ({when}this process; load {k['load_start']}→{k['load_end']}):\n\n"
+                      + table_kinematics(k))
         for wname, w in k["workloads"].items():
             for name, r in w["chains"].items():
                 if name != "closed form":

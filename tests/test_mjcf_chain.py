@@ -84,3 +84,57 @@ def test_jacobian_derivative_matches_c_mujoco_differences():
     fd = (c_mujoco(m, q + h * dq)[1] - c_mujoco(m, q - h * dq)[1]) / (2 * h)
     _, jvp = jax.jvp(lambda v: chain.jacobian(v), (q,), (dq,))
     np.testing.assert_allclose(np.asarray(jvp), fd, atol=1e-8)
+
+
+# The joints the model above leaves out: hinges about +x, -x, +y and -z (plane rotations of either
+# sign; "0 -2 0" is normalised to -y), tilted by body quaternions, with anchors off the body origin,
+# and a slide along a coordinate axis; the site has its own orientation.
+AXES_XML = """
+<mujoco>
+  <worldbody>
+    <body pos="0.02 0.01 0.1" quat="0.8 0.2 -0.1 0.3">
+      <joint type="hinge" axis="1 0 0" pos="0 0.01 0"/>
+      <joint type="hinge" axis="0 -2 0"/>
+      <geom size="0.03"/>
+      <body pos="0.1 0 -0.2" quat="0.7 -0.3 0.4 0.1">
+        <joint type="slide" axis="0 0 -1"/>
+        <joint type="hinge" axis="0 0 -1" pos="0.01 0 0.02"/>
+        <joint type="hinge" axis="-1 0 0"/>
+        <geom size="0.03"/>
+        <body pos="0 0.05 -0.2">
+          <joint type="hinge" axis="0 1 0" pos="0 0.02 0"/>
+          <geom size="0.03"/>
+          <site name="tip" pos="0.03 -0.02 -0.1" quat="0.5 0.5 0.5 0.5"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_every_joint_kind_matches_c_mujoco():
+    m = mujoco.MjModel.from_xml_string(AXES_XML)
+    chain = pj.MjcfChain(AXES_XML, "tip")
+    Q = np.random.default_rng(4).uniform(-2.0, 2.0, (8, m.nq))
+    x, J = jax.jit(lambda c, q: c.fk_jac_soa(q))(chain, Q.T)
+    for k, q in enumerate(Q):
+        xr, Jr = c_mujoco(m, q)
+        np.testing.assert_allclose(np.asarray(x)[:, k], xr, atol=1e-14)
+        np.testing.assert_allclose(np.asarray(J)[:, :, k], Jr, atol=1e-14)
+    q, dq, h = Q[0], np.random.default_rng(5).normal(size=m.nq), 1e-6
+    fd = (c_mujoco(m, q + h * dq)[1] - c_mujoco(m, q - h * dq)[1]) / (2 * h)
+    jvp = jax.jit(lambda c, q, dq: jax.jvp(lambda v: c.fk_jac_soa(v)[1], (q,), (dq,))[1])(chain, q, dq)
+    np.testing.assert_allclose(np.asarray(jvp), fd, atol=1e-8)
+
+
+def test_chain_is_a_pytree_of_the_mjx_models_arrays():
+    a, b = pj.MjcfChain(ARM5, "hand"), pj.MjcfChain(ARM5, "hand")
+    leaves = jax.tree_util.tree_leaves(a)
+    assert [np.shape(v) for v in leaves] == [np.shape(v) for v in jax.tree_util.tree_leaves(a.mjx_model)]
+    assert jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)
+    assert type(jax.tree_util.tree_map(lambda v: v, a).mjx_model) is type(a.mjx_model)
+    fk = jax.jit(lambda c, q: c.fk(q))
+    q = np.full(5, 0.3)
+    np.testing.assert_allclose(np.asarray(fk(b, q)), np.asarray(fk(a, q)), atol=0)
+    assert fk._cache_size() == 1  # equal chains share one compile
