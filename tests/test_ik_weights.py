@@ -33,7 +33,8 @@ def fig1():
 
 @pytest.fixture(scope="module")
 def fig1_result(fig1):
-    return fitting.estimate_ik_weights(*fig1, gamma=0.6, max_steps=150)
+    # the default max_steps (200): the README's call of test_readme_case_... shares this compile
+    return fitting.estimate_ik_weights(*fig1, gamma=0.6)
 
 
 def _batch4(*arrays):
@@ -88,12 +89,13 @@ def test_fig3_data_equals_numpy_generator():
 
 
 def test_fig1_data_follows_eq15():
-    """σ = 0: q̇ = J#_{W*} ẋ (NumPy formula); σ > 0: J q̇ = ẋ and the null-space part is linear in σ."""
+    """σ = 0: q̇ = J#_{W*} ẋ (NumPy formula); σ > 0: J q̇ = ẋ and the null-space part is linear in σ.
+    (The default sizes, 100 × 500: the README's call in test_readme_case_... shares the compile.)"""
     key = jax.random.PRNGKey(3)
-    q0, x0, J0 = (np.asarray(a) for a in fitting.ik_fig1_data(key, n_reps=2, K=50, sigma=0.0))
+    q0, x0, J0 = (np.asarray(a) for a in fitting.ik_fig1_data(key, sigma=0.0))
     np.testing.assert_allclose(q0, np.einsum("rkij,rkj->rki", weighted_pinv(J0, W_STAR), x0), atol=1e-12)
-    q1, x1, J1 = (np.asarray(a) for a in fitting.ik_fig1_data(key, n_reps=2, K=50, sigma=0.2))
-    q2 = np.asarray(fitting.ik_fig1_data(key, n_reps=2, K=50, sigma=0.4)[0])
+    q1, x1, J1 = (np.asarray(a) for a in fitting.ik_fig1_data(key, sigma=0.2))
+    q2 = np.asarray(fitting.ik_fig1_data(key, sigma=0.4)[0])
     assert np.array_equal(x1, x0) and np.array_equal(J1, J0)
     np.testing.assert_allclose(np.einsum("rkij,rkj->rki", J1, q1), x1, atol=1e-12)
     np.testing.assert_allclose(q2 - q0, 2 * (q1 - q0), atol=1e-12)
@@ -109,7 +111,7 @@ def test_fig1_setting_recovers_true_weights(fig1_result):
     Algorithm 1's fixed point is biased by ≈ 0.02 at γ = 0.6, σ = 0.2) and the error decreases
     from the W = I evaluation. The runs end at the fixed point of the update (SUCCESSFUL), not at
     the paper's e ≤ ε: the error of Eq 17 stays near 0.1 with this null-space motion (the paper
-    reports 0.07) even at the true weights; the few runs the 150 updates do not finish report
+    reports 0.07) even at the true weights; the few runs the 200 updates do not finish report
     MAX_STEPS. Converged weights lie within 0.2 of w* (5 standard deviations of the fixed point
     over repetitions, 0.04 at w = 0.8; the least-squares weights of the LM variant are closer)."""
     w = np.asarray(fig1_result.w)
@@ -319,7 +321,7 @@ def test_unidentifiable_and_inconsistent_items_are_not_successful():
 def test_batched_equals_per_subject(fig1, fig1_result):
     q, x, J = fig1
     for i in (0, 37):
-        one = fitting.estimate_ik_weights(q[i], x[i], J[i], gamma=0.6, max_steps=150)
+        one = fitting.estimate_ik_weights(q[i], x[i], J[i], gamma=0.6)
         assert np.allclose(one.w, fig1_result.w[i], atol=1e-12, rtol=0)
         assert int(one.iterations) == int(fig1_result.iterations[i]) and int(one.status) == int(fig1_result.status[i])
 
@@ -328,7 +330,7 @@ def test_inside_a_callers_jit_equals_eager(fig1, fig1_result):
     """Traced inputs take the strict-summation kernel (compiler options apply to top-level calls
     only); same weights as the eager (reassociated-sum) call to rounding."""
     q, x, J = fig1
-    f = jax.jit(lambda q, x, J: fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150))
+    f = jax.jit(lambda q, x, J: fitting.estimate_ik_weights(q, x, J, gamma=0.6))
     res = f(q[:4], x[:4], J[:4])
     np.testing.assert_allclose(res.w, fig1_result.w[:4], atol=1e-10, rtol=0)
     assert np.array_equal(res.iterations, fig1_result.iterations[:4])
@@ -339,8 +341,8 @@ def test_mask_equals_truncation(fig1):
     mask = np.arange(500) < 300
     q[300:] = np.nan  # padding is never looked at
     J[300:] = 0.0
-    a = fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask, max_steps=150)
-    b = fitting.estimate_ik_weights(q[:300], x[:300], J[:300], gamma=0.6, max_steps=150)
+    a = fitting.estimate_ik_weights(q, x, J, gamma=0.6, mask=mask)
+    b = fitting.estimate_ik_weights(q[:300], x[:300], J[:300], gamma=0.6)
     assert np.allclose(a.w, b.w, atol=1e-12, rtol=0)
     assert np.allclose(a.error_history, b.error_history, atol=1e-12, rtol=0, equal_nan=True)
 
@@ -350,8 +352,8 @@ def test_failing_subject_is_flagged_others_go_on(fig1, fig1_result):
     q[5, 10, 2] = np.nan
     J[9, 3] = 0.0  # rank-deficient Jacobian
     with pytest.raises(ValueError, match="qdot"):
-        fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150)
-    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, max_steps=150, on_invalid="flag")
+        fitting.estimate_ik_weights(q, x, J, gamma=0.6)
+    res = fitting.estimate_ik_weights(q, x, J, gamma=0.6, on_invalid="flag")
     st = np.asarray(res.status)
     assert st[5] == S.INVALID_INPUT and st[9] == S.INVALID_INPUT
     ok = np.setdiff1d(np.arange(100), [5, 9])
@@ -726,7 +728,7 @@ def test_bootstrap_batch_equals_singles_and_bad_input():
     mask = np.ones(q.shape[:-1], bool)
     mask[1, 4:] = False  # a subject with fewer trials
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
-    kw = dict(n_boot=8, gamma=0.6, max_steps=80)
+    kw = dict(n_boot=8, gamma=0.6)  # (the options of the chunking test above: its compiles are shared)
     res = fitting.bootstrap_ik_weights(q, x, J, mask=mask, seed=keys, **kw)
     for i in (0, 1):
         one = fitting.bootstrap_ik_weights(q[i], x[i], J[i], mask=mask[i], seed=keys[i], **kw)

@@ -55,6 +55,7 @@ from .model import (
     STIFFNESS_COND_MAX,
     TIME_CONSTANTS,
     _bound_residual,
+    _compiled_config,
     _Config,
     _final_residual,
     _model_and_planner,
@@ -120,12 +121,13 @@ def _stage2_batch(theta0, data, max_steps, *, cfg: _Config, steps: int, solver: 
     return jax.lax.map(lambda a: one(*a), (theta0, data))
 
 
-def _stack_motions(motions: list[_Motions], bucket: int = 16) -> dict:
+def _stack_motions(motions: list[_Motions], bucket: int = 16, cond_max: float = STIFFNESS_COND_MAX) -> dict:
     """Pad subjects' motions to a common count (a multiple of ``bucket``; padding = copies of
     the first motion with weight 0) -> dict of ``q_obs`` (S, B, 50, 4), ``t_ratio``, ``weight``
     (S, B), ``elbow`` (S,) (the gauge of the unidentifiable elbow rest angle, module docstring: the
     mean final elbow angle), ``lo``, ``hi`` (S, 3) (the bounds of the shoulder rest angles: the
-    recorded range widened by ``REST_MARGIN_DEG``)."""
+    recorded range widened by ``REST_MARGIN_DEG``), ``log_cond_max`` (S,) (the bound on cond(KJ),
+    inf: none; data rather than configuration, so that every bound shares one compile)."""
     B = max(bucket, -(-max(len(m) for m in motions) // bucket) * bucket)
     q, tr, w = [], [], []
     for m in motions:
@@ -138,7 +140,8 @@ def _stack_motions(motions: list[_Motions], bucket: int = 16) -> dict:
     return dict(q_obs=np.stack(q), t_ratio=np.stack(tr), weight=np.stack(w),
                 elbow=np.array([m.q_obs[:, -1, 3].mean() for m in motions]),
                 lo=np.stack([m.q_obs[..., :3].min((0, 1)) - margin for m in motions]),
-                hi=np.stack([m.q_obs[..., :3].max((0, 1)) + margin for m in motions]))
+                hi=np.stack([m.q_obs[..., :3].max((0, 1)) + margin for m in motions]),
+                log_cond_max=np.full(len(motions), math.log(cond_max)))
 
 
 def _integration(theta, motions: list[_Motions], data: dict, cfg: _Config, solver=None, steps=None):
@@ -204,7 +207,8 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
     grows by the power of two its fourth order asks for and stage 2 goes on from there.
     ``theta0`` (S, p) skips stage 1 and starts stage 2 there; ``steps``/``solver`` override the
     automatic choice."""
-    data = _stack_motions(motions)
+    data = _stack_motions(motions, cond_max=cfg.cond_max)
+    jcfg = _compiled_config(cfg)  # (the bound travels in data["log_cond_max"])
     S = len(motions)
     p = len(_param_names(cfg))
     out, s1 = {}, None
@@ -215,10 +219,10 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
         th1 = np.concatenate([np.zeros((S, _N_K)), q_final_mean[:, :3]], -1)
         # A motion whose equilibrium fails at the start (KJ = I, q_rest = mean final posture) would
         # make the start non-finite and stop Levenberg–Marquardt for the whole subject: leave it out.
-        ok = np.asarray(_start_usable(th1, data, cfg=cfg))
+        ok = np.asarray(_start_usable(th1, data, cfg=jcfg))
         out["dropped"] = [np.flatnonzero(~ok[s, : len(m)]) for s, m in enumerate(motions)]
         data["weight"] = data["weight"] * ok
-        s1 = jax.device_get(_stage1_batch(th1, data, np.int32(max_steps[0]), cfg=cfg))
+        s1 = jax.device_get(_stage1_batch(th1, data, np.int32(max_steps[0]), cfg=jcfg))
         theta0 = s1["start"]
         out.update(x1=s1["x"], cost1=s1["cost"], converged1=s1["converged"], steps1=s1["steps"])
     else:
@@ -242,7 +246,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
         return out
     lm_steps = np.zeros(S, int)
     for refine in range(3):
-        s2 = _stage2_batch(theta0, data, np.int32(max_steps[1]), cfg=cfg, steps=steps, solver=solver)
+        s2 = _stage2_batch(theta0, data, np.int32(max_steps[1]), cfg=jcfg, steps=steps, solver=solver)
         if not keep_jac:
             s2.pop("jac")
         s2 = jax.device_get(s2)
@@ -250,7 +254,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
         if max_steps[1] == 0:  # (the residual and Jacobian at theta0 only)
             err = np.full(S, np.nan)
             break
-        err = np.rad2deg(np.asarray(_integration_error_batch(s2["x"], s2["residual"], data, cfg=cfg, steps=steps,
+        err = np.rad2deg(np.asarray(_integration_error_batch(s2["x"], s2["residual"], data, cfg=jcfg, steps=steps,
                                                              solver=solver)))
         finite = np.all(np.isfinite(s2["x"]), axis=-1)
         if fixed_steps is not None or refine == 2 or np.all(~finite | (err <= INTEGRATION_TOL_DEG)):
@@ -430,7 +434,8 @@ def fit_reaching(
       unbounded stage-1 fits drift to near-singular stiffness (cond 6 400 for S01) and rest angles
       far outside the joint range; the bound, and the recorded joint range widened by 20° for the
       shoulder rest angles, hold them (smooth penalty residuals, negligible inside; ``bound_active`` reports
-      where a bound binds at the optimum).
+      where a bound binds at the optimum). The bound is data of the compiled fit: fits that differ
+      only in it share one compilation.
 
     **Cost** (2 idle cores, the four bundled subjects, every task, repetitions 1–7, 747 motions,
     defaults): about 2 min with compilation, every subject converged; stage 1 alone
@@ -590,7 +595,8 @@ def _bound_pull_se(theta, residual, cov, cost, n_res, lo, hi, cfg) -> np.ndarray
     use = np.isfinite(np.diag(cov))  # stage 1 only: the postural parameters
     if not np.isfinite(cost) or cost <= 0 or n_res <= use.sum():
         return np.zeros(4)
-    Jb = np.asarray(jax.jacfwd(_bound_residual)(jnp.asarray(theta), {"lo": lo, "hi": hi}, cfg))[:, use]
+    bounds = {"lo": lo, "hi": hi, "log_cond_max": math.log(cfg.cond_max)}
+    Jb = np.asarray(jax.jacfwd(_bound_residual)(jnp.asarray(theta), bounds, cfg))[:, use]
     rb = np.asarray(residual)[-4:]
     sigma2 = 2.0 * cost / (n_res - use.sum())
     H = sigma2 * np.linalg.pinv(cov[np.ix_(use, use)]) - Jb.T @ Jb

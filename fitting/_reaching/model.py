@@ -88,8 +88,17 @@ class _Config:
     steps: int  # least RK4 steps per sample interval (1/49 of normalised time) for accuracy
     ftol: float = 1e-8
     xtol: float = 1e-8
-    cond_max: float = STIFFNESS_COND_MAX  # bound on cond(KJ) (inf: none)
+    # Bound on cond(KJ) (inf: none). Read on the host only: the compiled fits take
+    # ``log cond_max`` from their data (``_stack_motions``), so every bound shares one compile,
+    # and they are called with :func:`_compiled_config` (this field at its default).
+    cond_max: float = STIFFNESS_COND_MAX
     stol: float = 1e-4  # converged within 0.014 standard errors (fitting.least_squares)
+
+
+def _compiled_config(cfg: _Config) -> _Config:
+    """``cfg`` as the compiled fits see it (a static argument): ``cond_max`` at its default,
+    since they read the bound from ``data["log_cond_max"]``."""
+    return dataclasses.replace(cfg, cond_max=STIFFNESS_COND_MAX)
 
 
 def _damping_size(damping):
@@ -223,12 +232,17 @@ def _equilibria(p, target, q_final):
 
 def _bound_residual(theta, data, cfg: _Config):
     """The bounds as residuals (4,) [rad]: ``BOUND_WEIGHT`` times how far ``log cond(KJ)`` exceeds
-    ``log cond_max``, and how far each shoulder rest angle lies outside ``[lo, hi]``, each through
-    a softplus of width ``BOUND_WIDTH`` (smooth, so Levenberg–Marquardt does not crawl along a
-    kink; negligible a few widths inside, where the fit is unregularised)."""
+    ``data["log_cond_max"]`` (a traced value: every bound shares one compile; inf: no bound), and
+    how far each shoulder rest angle lies outside ``[lo, hi]``, each through a softplus of width
+    ``BOUND_WIDTH`` (smooth, so Levenberg–Marquardt does not crawl along a kink; negligible a few
+    widths inside, where the fit is unregularised)."""
     hinge = lambda g, width: width * jax.nn.softplus(g / width)  # noqa: E731
     w = jnp.linalg.eigvalsh(log_stiffness(theta[:_N_K], 4))
-    over_c = hinge(w[-1] - w[0] - math.log(cfg.cond_max), BOUND_WIDTH[0]) if math.isfinite(cfg.cond_max) else 0.0 * w[0]
+    log_max = jnp.asarray(data["log_cond_max"], w.dtype)
+    # (no bound: exactly 0 with a zero derivative, as softplus(-inf) would give NaN derivatives here)
+    over_c = jnp.where(jnp.isfinite(log_max),
+                       hinge(w[-1] - w[0] - jnp.where(jnp.isfinite(log_max), log_max, 0.0), BOUND_WIDTH[0]),
+                       0.0 * w[0])
     q = theta[_N_K:_N_P]
     over_q = hinge(q - data["hi"], BOUND_WIDTH[1]) + hinge(data["lo"] - q, BOUND_WIDTH[1])
     return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])

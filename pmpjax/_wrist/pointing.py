@@ -55,6 +55,7 @@ from .._base import (
     pad_rows,
     read_text_file,
     replace,
+    row_chunks,
     without_unit_checks,
 )
 from .._chains import Wrist
@@ -743,7 +744,8 @@ def synthetic_pointing_experiment(
             rows["quat"].append(q)
             rows["target"].append(names_t.astype(str))
     q = np.concatenate(rows["quat"])
-    rows["quat"] = [np.asarray(_imu_quaternions(q, noise * rng.normal(size=q.shape)))]
+    # (rows in padded chunks: experiments of any length share one compile)
+    rows["quat"] = [row_chunks(_imu_quaternions, q, noise * rng.normal(size=q.shape), small=64, chunk=4096)]
     rec = PointingRecording(*(np.concatenate(rows[c]) for c in ("subject", "trial", "time", "quat", "target")),
                             d=float(d), radius=r_t, source="<synthetic>")
     donders = synthetic_recordings(KJ, q_rest, n_donders, noise_deg=donders_noise_deg,
