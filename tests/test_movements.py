@@ -210,7 +210,7 @@ def at_optimum(case):
     Q = np.linalg.svd(np.eye(x.size) - np.outer(v, v))[0][:, : x.size - 1]
     sigma2 = r @ r / (r.size - x.size)
     cov = sigma2 * Q @ np.linalg.inv(Q.T @ J.T @ J @ Q) @ Q.T
-    return dict(x=x, residual=residual, r=r, J=J, v=v, Q=Q, cov=cov, se=np.sqrt(np.diag(cov)), P=P)
+    return dict(x=x, residual=residual, r=r, J=J, v=v, Q=Q, cov=cov, se=np.sqrt(np.diag(cov)), P=P, owner=owner)
 
 
 def test_the_rebuilt_objective_is_the_fit_s(case, at_optimum):
@@ -220,20 +220,23 @@ def test_the_rebuilt_objective_is_the_fit_s(case, at_optimum):
     np.testing.assert_allclose(0.5 * r @ r, fit.loss[0], rtol=1e-9)
 
 
-def test_standard_errors_are_the_gauss_newton_ones(case, at_optimum):
-    # The reported errors against the delta method on the rebuilt objective: the shape of the
-    # covariance (its Jacobian, the offsets profiled out, the gauge; measured agreement 3e-8) and
-    # its scale σ² (the 20 reaches' rows only: the 4 padding reaches of the bucket of 8 are not
-    # data) within 1 %. Errors 1.5 or 1/0.91 times too large fail both.
+def test_standard_errors_are_the_delete_one_reach_jackknife(case, at_optimum):
+    # The reported errors against the delete-one-reach jackknife rebuilt in NumPy on the rebuilt
+    # objective: for each of the 20 reaches, the Gauss–Newton step of the problem without its rows
+    # and its offsets (least squares on the central-difference Jacobian of every other row, the
+    # gauge left out by the minimum-norm solution), then (G−1)/G Σ (Δ_b − Δ̄)(Δ_b − Δ̄)ᵀ. Errors
+    # 1.5 times too large, Gauss–Newton errors (2–3× smaller on such data:
+    # benchmarks/movements_calibration.py) or a reach's own offsets left in fail.
     _, fit, _, _ = case
-    P, se, cov, v = at_optimum["P"], at_optimum["se"][: at_optimum["P"]], at_optimum["cov"], at_optimum["v"]
-    ratio = fit.stderr[0] / se
-    assert np.all(np.abs(ratio - 1) < 0.01), ratio
-    assert np.ptp(ratio) < 1e-4 * ratio.mean(), ratio
-    np.testing.assert_allclose(fit.cov[0], ratio.mean() ** 2 * cov[:P, :P], rtol=1e-4,
-                               atol=1e-4 * np.abs(cov[:P, :P]).max())
+    P, r, J, owner, v = at_optimum["P"], at_optimum["r"], at_optimum["J"], at_optimum["owner"], at_optimum["v"]
+    G = int(owner.max()) + 1
+    D = np.stack([np.linalg.lstsq(J[owner != b], -r[owner != b], rcond=1e-6)[0][:P] for b in range(G)])
+    E = D - D.mean(0)
+    cov = (G - 1) / G * E.T @ E
+    np.testing.assert_allclose(fit.stderr[0], np.sqrt(np.diag(cov)), rtol=2e-3)
+    np.testing.assert_allclose(fit.cov[0], cov, rtol=2e-3, atol=2e-3 * np.abs(cov).max())
     # zero variance along the unidentified direction
-    assert np.abs(fit.cov[0] @ v[:P]).max() < 1e-10 * np.abs(fit.cov[0]).max()
+    assert np.abs(fit.cov[0] @ v[:P]).max() < 1e-8 * np.abs(fit.cov[0]).max()
 
 
 def test_converged_means_at_the_optimum_to_a_small_fraction_of_a_standard_error(at_optimum):
