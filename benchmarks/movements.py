@@ -146,15 +146,11 @@ compile: lower + XLA; ratios: the chain / closed form)::
     (median over the rounds 1.08×) and 1.00× at 256, the forward-mode Jacobian of the simulation
     (stage 2's work per iteration) 0.98×, the kernel with its derivative along each joint 1.14×
     (median 1.07×); compilation 0.8–1.0× the closed form's (2.2× for jacfwd in this run, 1.02× in
-    the run before). The kernel alone reads 1.46× here from one fast round of the closed form (0.35
-    ms; its other rounds 0.44–1.28 ms, MjcfChain's 0.51–0.89 ms); its median is 0.78×. The run
-    before (07:39 UTC, load 5.6 → 4.7) gave 0.96, 0.90, 0.98, 0.72 and 0.98 (fastest calls) and
+    a second run). The kernel alone reads 1.46× here from one fast round of the closed form (0.35
+    ms; its other rounds 0.44–1.28 ms, MjcfChain's 0.51–0.89 ms); its median is 0.78×. A second
+    run (07:39 UTC, load 5.6 → 4.7) gave 0.96, 0.90, 0.98, 0.72 and 0.98 (fastest calls) and
     0.90, 1.01, 0.96, 1.02 and 0.97 (medians) for the five workloads. The MJX-style chain stays
-    1.6–2.0× at 24 reaches and in jacfwd. The previous form of MjcfChain, which built the world
-    frames as 3×3 products from the world out with five separate ``sincos`` calls and flattened its
-    MJX model node by node in every jitted call (≈ 0.4 ms a call; the model's arrays as one tuple of
-    leaves take ≈ 0.03 ms), measured 2.51× for the kernel, 3.72× and 1.93× in simulate at 24 and 256
-    reaches and 1.84× in jacfwd (2026-12-06 03:49 UTC, load 5.1 → 4.3).
+    1.6–2.0× at 24 reaches and in jacfwd.
 """
 
 from __future__ import annotations
