@@ -57,7 +57,12 @@ Two other runs at this size on this machine (load 5–7) stopped making progress
 chunk's execution never completed, with every XLA:CPU thread idle and the caller waiting in
 ``device_get`` (once in the local engine with 1 device, after the warm-up; once in a Dask worker,
 which runs one chunk at a time). Three runs of ``fitting.sweep`` on 5 and 10 chunks outside the
-benchmark completed.
+benchmark completed. Cause: both XLA:CPU intra-op pool threads blocked in jaxlib 0.10's batched
+LAPACK kernel (``lapack_dsyevd_ffi`` → ``ParallelBatchMap`` → ``BlockingCounter::Wait``: above
+~1 500 3×3 matrices it schedules the batch's pieces on that pool and waits), one per ``eigvalsh``
+of ``simulate``'s traced check of ``W`` and ``KJ``; with every pool thread waiting nothing runs the
+pieces. The check is now LAPACK-free and ``fitting.sweep`` reports a chunk that stalls
+(``fitting/_sweep/engines.py``) instead of waiting forever.
 """
 
 # ruff: noqa: E501  (the pasted result table above)

@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -398,3 +399,72 @@ def test_donders_power_rows_report_the_fits_status_codes():
                 noise_deg=jnp.array([0.5, 0.5]), seed=jnp.array([0, 1]))
     out = jax.jit(jax.vmap(partial(donders_power_row, n_max=40, n_starts=1, max_steps=1)))(rows)
     assert [int(s) for s in out["status"]] == [int(pj.Status.MAX_STEPS), int(pj.Status.TOO_FEW_DATA)]
+
+
+def test_a_stalled_chunk_raises_and_keeps_the_finished_chunks(tmp_path, monkeypatch, reference):
+    # A chunk whose computation does not finish while the process uses no CPU (an XLA:CPU
+    # deadlock; here the last chunk's outputs never become ready) fails with an explanation
+    # instead of hanging; the chunks finished before stay in the store and a new run resumes.
+    from fitting._sweep import engines
+
+    release = threading.Event()
+
+    class Never:
+        def is_ready(self):
+            return False
+
+        def block_until_ready(self):
+            release.wait()
+
+    init = engines._LocalEngine.__init__
+
+    def stalling_init(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        kernel, calls = self.kernel, []
+
+        def run(args):
+            calls.append(None)
+            out = kernel(args)
+            return out if len(calls) < 3 else jax.tree_util.tree_map(lambda _: Never(), out)
+
+        self.kernel = run
+
+    monkeypatch.setattr(engines._LocalEngine, "__init__", stalling_init)
+    monkeypatch.setattr(engines, "STALL_SECONDS", 0.3)
+    t0 = time.perf_counter()
+    try:
+        with pytest.raises(RuntimeError, match=r"sweep chunk 2 stalled: .*XLA:CPU deadlocks"):
+            fitting.sweep(tiny, PARAMS, chunk_size=9, out=tmp_path / "s", progress=False)
+    finally:
+        release.set()
+    assert time.perf_counter() - t0 < 5.0
+    monkeypatch.undo()
+    again = fitting.sweep(tiny, PARAMS, chunk_size=9, out=tmp_path / "s", progress=False)
+    assert (again.chunks_reused, again.chunks_computed) == (2, 1)
+    _equal(again.outputs, reference)
+
+
+def test_a_slow_chunk_that_computes_is_not_stalled():
+    # Progress is CPU time: a chunk that takes longer than the stall window while the process
+    # computes is waited for.
+    from fitting._sweep.engines import _wait_computed
+
+    start = time.monotonic()
+
+    class Busy:
+        def is_ready(self):
+            return time.monotonic() - start > 1.0
+
+        def block_until_ready(self):
+            time.sleep(max(0.0, 1.0 - (time.monotonic() - start)))
+
+    def burn():
+        while time.monotonic() - start < 1.1:
+            sum(range(1000))
+
+    t = threading.Thread(target=burn)
+    t.start()
+    try:
+        _wait_computed([Busy()], "sweep chunk 0", stall_seconds=0.2)
+    finally:
+        t.join()

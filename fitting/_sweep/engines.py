@@ -4,12 +4,22 @@ The local kernel is ``jit(shard_map(vmap(fn)))`` over the local devices (rows sp
 ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` gives two devices); with a Dask client each
 chunk is one task on the cluster's workers. Chunks are dispatched two ahead, so the store writes a
 finished chunk while the next ones compute (memory: at most three chunks of ``fn``'s intermediates).
+
+**Stalled chunks**: a chunk whose computation has not finished while its process used almost no
+CPU for :data:`STALL_SECONDS` raises ``RuntimeError`` (on a Dask worker: the task fails) instead
+of waiting forever. XLA:CPU can deadlock that way with jax 0.10: its batched LAPACK kernels
+(``eigh``, ``cholesky``, ``solve``, ``svd``, ... under ``vmap``, above roughly 200 000 flops
+per call: 1 500 3×3 ``eigh``) split the batch over the intra-op thread pool and block their pool
+thread until the pieces are done; when every pool thread does so at once (two such calls on a
+2-core machine) nothing runs the pieces. The chunks finished before are in the store.
 """
 
 from __future__ import annotations
 
 import collections
 import math
+import threading
+import time
 import uuid
 from typing import Any
 
@@ -17,6 +27,51 @@ import jax
 import numpy as np
 
 from pmpjax.internal import fast_compile_jit
+
+#: Seconds a chunk may go unfinished while its process uses almost no CPU (below
+#: :data:`IDLE_CPU_FRACTION` of one core) before it is reported as stalled.
+STALL_SECONDS = 120.0
+IDLE_CPU_FRACTION = 0.1  # an idle Dask worker (profiler, heartbeats) uses 3-4 %
+
+
+def _wait_computed(leaves, chunk, stall_seconds=None):
+    """Wait until the arrays ``leaves`` of a chunk (``chunk``: its name in the error) are computed;
+    ``RuntimeError`` when the process stops computing for ``stall_seconds`` (default
+    :data:`STALL_SECONDS`) before that.
+
+    A helper thread blocks on the arrays (no polling delay); this one wakes up to look at the
+    process's CPU time. Progress is CPU time, not wall time: on a loaded machine a slow chunk still
+    uses CPU (its share), a deadlocked XLA:CPU none."""
+    stall = STALL_SECONDS if stall_seconds is None else float(stall_seconds)
+    leaves = list(leaves)
+    if all(a.is_ready() for a in leaves if hasattr(a, "is_ready")):
+        return leaves
+    ready = threading.Event()
+
+    def block():
+        try:
+            jax.block_until_ready(leaves)
+        except Exception:  # noqa: BLE001 - device_get below raises it in the caller
+            pass
+        finally:
+            ready.set()
+
+    threading.Thread(target=block, name="pmpjax-sweep-wait", daemon=True).start()
+    t0, cpu0 = time.monotonic(), time.process_time()
+    while not ready.wait(min(1.0, stall / 4)):
+        t, cpu = time.monotonic(), time.process_time()
+        if t - t0 >= stall:
+            if cpu - cpu0 < IDLE_CPU_FRACTION * (t - t0):
+                raise RuntimeError(
+                    f"{chunk} stalled: its computation has not finished and this process used "
+                    f"{cpu - cpu0:.1f} s of CPU in the last {t - t0:.0f} s. XLA:CPU deadlocks this way with "
+                    "jax 0.10 when batched LAPACK calls (eigh, cholesky, solve, svd, ... under vmap) occupy "
+                    "every intra-op pool thread at once; this process (on Dask: its worker, `client.restart()`) "
+                    "cannot run XLA:CPU computations any more. Run the sweep again in a new process (with "
+                    "`out`, the finished chunks are kept), with a smaller `chunk_size` (fewer rows per LAPACK "
+                    "call), or avoid LAPACK in `fn`.")
+            t0, cpu0 = t, cpu
+    return leaves
 
 
 class _LocalEngine:
@@ -59,11 +114,14 @@ class _LocalEngine:
             args = jax.device_put(chunk_params(k, self.length), self.sharding)
             pending.append((k, self.kernel(args)))  # asynchronous: runs while earlier chunks are stored
             if len(pending) > self.ahead:
-                k0, o = pending.popleft()
-                done(k0, [np.asarray(a) for a in jax.device_get(jax.tree_util.tree_leaves(o))])
+                done(*self._fetch(*pending.popleft()))
         while pending:
-            k0, o = pending.popleft()
-            done(k0, [np.asarray(a) for a in jax.device_get(jax.tree_util.tree_leaves(o))])
+            done(*self._fetch(*pending.popleft()))
+
+    @staticmethod
+    def _fetch(k, out):
+        leaves = _wait_computed(jax.tree_util.tree_leaves(out), f"sweep chunk {k}")
+        return k, [np.asarray(a) for a in jax.device_get(leaves)]
 
 
 _WORKER_KERNELS: dict[str, Any] = {}
@@ -78,7 +136,8 @@ def _dask_chunk(fn, key: str, x64: bool, args: dict, rows: int) -> list[np.ndarr
         if len(_WORKER_KERNELS) >= 8:
             _WORKER_KERNELS.pop(next(iter(_WORKER_KERNELS)))
         kernel = _WORKER_KERNELS[key] = fast_compile_jit(jax.vmap(fn))
-    return [np.asarray(a)[:rows] for a in jax.device_get(jax.tree_util.tree_leaves(kernel(args)))]
+    leaves = _wait_computed(jax.tree_util.tree_leaves(kernel(args)), "this sweep chunk")
+    return [np.asarray(a)[:rows] for a in jax.device_get(leaves)]
 
 
 class _DaskEngine:

@@ -415,6 +415,36 @@ def _judge(status, error, q, q0, batch, rtol, atol, valid):
     return to_jax(status) if xp is np else status
 
 
+#: Largest ``n`` whose positive-definiteness test runs as unrolled LDLᵀ pivots (above: ``eigvalsh``).
+_PD_UNROLLED_N = 8
+
+
+def _positive_definite(M):
+    """(...) bool: the symmetric (..., n, n) ``M`` is positive definite (every LDLᵀ pivot > 0).
+
+    Up to :data:`_PD_UNROLLED_N` this is elementwise JAX, not a LAPACK call: under ``vmap`` at
+    more than about 1 500 rows jaxlib 0.10's batched LAPACK kernels split the batch over XLA:CPU's
+    intra-op thread pool and block a pool thread waiting for the pieces, which deadlocks the
+    process when every pool thread does so at once (two such calls, here ``W`` and ``KJ``, on a
+    2-core machine; fixed upstream after jax 0.11.0). ``fitting.sweep``'s chunks of the curvature
+    sweep hung this way."""
+    n = M.shape[-1]
+    if n > _PD_UNROLLED_N:
+        return jnp.linalg.eigvalsh(M)[..., 0] > 0
+    L = [[None] * n for _ in range(n)]
+    d = []
+    ok = jnp.ones(M.shape[:-2], bool)
+    for j in range(n):
+        dj = M[..., j, j] - sum((L[j][k] ** 2 * d[k] for k in range(j)), jnp.zeros_like(M[..., j, j]))
+        ok &= dj > 0
+        d.append(dj)
+        safe = jnp.where(dj > 0, dj, 1.0)
+        for i in range(j + 1, n):
+            L[i][j] = (M[..., i, j] - sum((L[i][k] * L[j][k] * d[k] for k in range(j)),
+                                          jnp.zeros_like(M[..., i, j]))) / safe
+    return ok
+
+
 def _valid_items(model, planner, q0, targets, batch):
     """Traced per-item checks (a caller's ``jit``/``vmap``, where the eager ones cannot run): finite
     ``q0``, ``targets``, ``q_rest``; symmetric positive definite ``W`` and ``KJ``; finite, positive
@@ -427,8 +457,8 @@ def _valid_items(model, planner, q0, targets, batch):
         if M is None:
             continue
         sym = jnp.max(jnp.abs(M - jnp.swapaxes(M, -1, -2)), axis=(-2, -1)) <= 1e-8 * jnp.max(jnp.abs(M), axis=(-2, -1))
-        pd = jnp.linalg.eigvalsh(jnp.where(fin(M, 2)[..., None, None], 0.5 * (M + jnp.swapaxes(M, -1, -2)),
-                                           jnp.eye(M.shape[-1])))[..., 0] > 0
+        pd = _positive_definite(jnp.where(fin(M, 2)[..., None, None], 0.5 * (M + jnp.swapaxes(M, -1, -2)),
+                                          jnp.eye(M.shape[-1])))
         ok &= jnp.broadcast_to(fin(M, 2) & sym & pd, batch)
     if model.q_rest is not None:
         ok &= jnp.broadcast_to(fin(model.q_rest, 1), batch)
