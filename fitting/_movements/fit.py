@@ -48,7 +48,7 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 from pmpjax.internal import fast_compile_jit
 
-from .._optimise import least_squares, lm_iterations, spd_size
+from .._optimise import group_jackknife_covariance, least_squares, lm_iterations, spd_size
 from . import model as mdl
 from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, subject_reaches
 
@@ -255,32 +255,16 @@ def _unidentified(J, cfg, rows: int, B: int):
 
 
 def _reach_jackknife_covariance(jac, residual, cfg, B: int, used: int) -> np.ndarray:
-    """Delete-one-reach jackknife covariance (p, p) of a subject's parameters (NumPy, on the host),
-    one Gauss–Newton step from the optimum per deleted reach: each reach's rows (its samples and
-    its nuisance priors) projected off its own nuisance columns (profiled), ``Δ_b = (A − A_b)⁺ g_b``
-    with ``A = Σ_b G̃_bᵀG̃_b`` (+ the bounds' rows) and ``g_b = G̃_bᵀ r_b``, then
-    ``(G−1)/G Σ_b (Δ_b − Δ̄)(Δ_b − Δ̄)ᵀ`` over the ``used`` reaches (the first; the others pad)."""
-    J = np.where(np.isfinite(jac), jac, 0.0)
-    res = np.where(np.isfinite(residual), residual, 0.0)
-    k, p, n = mdl.n_nuisance(cfg), mdl.n_params(cfg), cfg.n
-    rows, P = SAMPLES * n, J.shape[1]
-    Jb, rb = J[: B * rows].reshape(B, rows, P), res[: B * rows].reshape(B, rows)
-    G = Jb[:used, :, :p]
-    if P > p:
-        Jp, rp = J[B * rows + 1 + n:].reshape(B, k, P), res[B * rows + 1 + n:].reshape(B, k)
-        G = np.concatenate([G, Jp[:used, :, :p]], axis=1)
-        rb = np.concatenate([rb, rp], axis=1)
-        for b in range(used):
-            C = np.concatenate([Jb[b, :, p + b * k:p + (b + 1) * k], Jp[b, :, p + b * k:p + (b + 1) * k]])
-            G[b] -= C @ np.linalg.lstsq(C, G[b], rcond=1e-10)[0]
-    Jbound = J[B * rows: B * rows + 1 + n, :p]
-    g = np.einsum("brp,br->bp", G, rb[:used])
-    Ab = np.einsum("brp,brq->bpq", G, G)
-    A = Ab.sum(0) + Jbound.T @ Jbound
-    D = np.stack([np.linalg.pinv(A - Ab[b], rcond=IDENTIFIABILITY_RCOND**2, hermitian=True) @ g[b]
-                  for b in range(used)])
-    E = D - D.mean(0)
-    return (used - 1) / max(used, 1) * E.T @ E
+    """The delete-one-reach jackknife covariance (p, p) of a subject's parameters (module
+    docstring): the rows of the first ``used`` of ``B`` reaches (their samples and their nuisance
+    priors) grouped by reach, each reach's own nuisance columns profiled out."""
+    k, n = mdl.n_nuisance(cfg), cfg.n
+    reach = np.arange(B)
+    groups = np.concatenate([np.repeat(reach, SAMPLES * n), np.full(1 + n, -1), np.repeat(reach, k)])
+    groups = np.where(groups < used, groups, -1)[: np.asarray(jac).shape[0]]
+    nuisance = np.where(np.repeat(reach, k) < used, np.repeat(reach, k), -1) if k else None
+    return group_jackknife_covariance(jac, residual, groups, mdl.n_params(cfg), nuisance_groups=nuisance,
+                                      rcond=IDENTIFIABILITY_RCOND**2)
 
 
 def _rows(dat, cfg) -> int:

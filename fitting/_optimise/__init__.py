@@ -1,5 +1,6 @@
 """The optimiser loop every fit shares (Levenberg–Marquardt) and the SPD parametrisation of stiffness."""
 
+from .jackknife import group_jackknife_covariance as group_jackknife_covariance
 from .least_squares import LeastSquaresResult as LeastSquaresResult
 from .least_squares import covariance as covariance
 from .least_squares import least_squares as least_squares
