@@ -164,9 +164,13 @@ def reaching_part(R, n_motions=16):
     on 16 motions of the HuG-MP arm made by the tests' independent LSODA reference."""
     import test_reaching as ref
 
-    from fitting._reaching import fit as rfit
-    from fitting._reaching import model as rmodel
-    from fitting._reaching import motions as rmotions
+    from fitting.internal import (
+        REACHING_SAMPLES,
+        ReachingConfig,
+        ReachingMotions,
+        fit_reaching_motions,
+        reaching_param_names,
+    )
 
     KJ, q_rest = ref._kj_with_cond(10.0), np.deg2rad([-30.0, -35.0, -5.0, 60.0])
     rng = np.random.default_rng(7)
@@ -178,15 +182,15 @@ def reaching_part(R, n_motions=16):
     motions = []
     for r in range(R):
         q = clean + np.deg2rad(NOISE_DEG) * np.random.default_rng(500 + r).standard_normal(clean.shape)
-        x = ref.arm_fk_batch(q.reshape(-1, 4)).reshape(n_motions, rmotions.SAMPLES, 3)
+        x = ref.arm_fk_batch(q.reshape(-1, 4)).reshape(n_motions, REACHING_SAMPLES, 3)
         one = np.ones(n_motions, int)
-        motions.append(rmotions._Motions(f"R{r:02d}", one, one, np.arange(1, n_motions + 1), q, x, T, 1.5 * T))
-    cfg = rmodel._Config("lambda0", "tau0_KJ", "fitted", 5)
+        motions.append(ReachingMotions(f"R{r:02d}", one, one, np.arange(1, n_motions + 1), q, x, T, 1.5 * T))
+    cfg = ReachingConfig("lambda0", "tau0_KJ", "fitted", 5)
     t0 = time.perf_counter()
-    out = rfit._fit_motions(motions, cfg)
+    out = fit_reaching_motions(motions, cfg)
     wall = time.perf_counter() - t0
     ok = np.asarray(out["converged"])
-    names = rfit._param_names(cfg)
+    names = reaching_param_names(cfg)
     rows, table = calibration(names, np.asarray(out["x"])[ok], np.asarray(out["se"])[ok])
     print(f"fit_reaching: {int(ok.sum())} of {R} replicates converged; fit {wall:.1f} s (compilation included)")
     print(table)

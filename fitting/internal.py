@@ -27,7 +27,9 @@ from ._reaching.model import DAMPINGS as REACHING_DAMPINGS
 from ._reaching.model import MODELS as REACHING_MODELS
 from ._reaching.model import TIME_CONSTANTS as REACHING_TIME_CONSTANTS
 from ._reaching.model import _Config as ReachingConfig
+from ._reaching.model import _param_names as reaching_param_names
 from ._reaching.motions import SAMPLES as REACHING_SAMPLES
+from ._reaching.motions import _Motions as ReachingMotions
 from ._reaching.motions import _motions as reaching_motions
 from ._reaching.predict import BASELINES as REACHING_BASELINES
 
@@ -43,6 +45,7 @@ __all__ = [
     "FIT_DT", "FIT_SPAN", "REACHING_BASELINES", "REACHING_DAMPINGS", "REACHING_MODELS",
     "REACHING_SAMPLES", "REACHING_TIME_CONSTANTS", "atomic_write", "curvature_row",
     "donders_power_row", "fit_nio_batch", "fit_reaching_motions", "LocalEngine",
-    "movement_fit_module", "nio_residual", "nio_starts", "reaching_motions", "ReachingConfig",
+    "movement_fit_module", "nio_residual", "nio_starts", "reaching_motions", "ReachingConfig", "ReachingMotions",
+    "reaching_param_names",
     "silverman_weights", "time_constant_item_data",
 ]

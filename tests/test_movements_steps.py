@@ -43,7 +43,7 @@ def test_only_inaccurate_subjects_are_refitted_at_twice_the_steps(monkeypatch):
         S, P = x.shape
         N = data["q_obs"].shape[1] * SAMPLES * 3 + 4 + data["q_obs"].shape[1] * mdl.n_nuisance(cfg)
         return dict(x=x + 1.0, cost=np.ones(S), residual=np.zeros((S, N)), converged=np.ones(S, bool),
-                    status=np.zeros(S, int), steps=np.full(S, 5), cov=np.tile(np.eye(P), (S, 1, 1)),
+                    status=np.zeros(S, int), steps=np.full(S, 5), jac=np.zeros((S, N, P)),
                     singular_values=np.ones((S, p)), V0=np.zeros((S, p, p)),
                     integration_error=np.array([math.radians(error_at[n](steps)) for n in names]))
 
