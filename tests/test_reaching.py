@@ -620,3 +620,56 @@ def test_main_job_part_writes_the_held_out_table_and_a_figure(tmp_path, clean_fi
     sig = inspect.signature(fitting.fit_reaching).parameters
     default = "/".join(sig[k].default for k in ("model", "damping", "time_constants"))
     assert [n for n, r in variants.items() if r["default"] == "True"] == [default]
+
+
+def test_fit_movements_on_the_hugmp_files_is_the_same_fit(folders):
+    """The generic path — HuG-MP motions read by ``pmpjax.read_joint_angles``, fitted by
+    ``fitting.fit_movements(segmented=True)`` on ``pmpjax.ShoulderElbowArm`` with fractions of the
+    movement duration and fit_reaching's 20° rest margin, then predicted by
+    ``predict_movements`` — gives fit_reaching's fit and predictions: the same optimum (the
+    identifiable parameters within 0.02 standard errors, the same loss and standard errors) and
+    the same held-out movements. ``q_rest`` may differ only along the elbow's unidentified
+    direction ``KJ⁻¹ e4`` (fit_reaching fixes the elbow's rest angle; fit_movements finds that
+    direction and names it). A difference in the segmentation (T), the resampling, the start
+    posture or target, the time normalisation (fractions of T, not of the recording) or the
+    residual's weights moves the optimum by many standard errors."""
+    opts = dict(reps=(1,), tasks=(1,), model="lambda0", damping="tau0_KJ", time_constants="fitted")
+    fr = fitting.fit_reaching([2], directory=folders["clean"], **opts)
+    path = folders["clean"] / "S02_trajs.mat"
+    sub = pj.load_hugmp("S02", folders["clean"])
+    left_out = {(t, r, i) for t, r, i, _ in fr.skipped["S02"]}
+
+    def motions(reps):
+        return [(t, r, i) for t in opts["tasks"] for r, i, _ in sub.motions.get(t, [])
+                if r in reps and (t, r, i) not in left_out]
+
+    recs = [pj.read_joint_angles(path, motion=m) for m in motions(opts["reps"])]
+    assert len(recs) == fr.n_motions[0] >= 5
+    g = fitting.fit_movements(pj.ShoulderElbowArm(), recs, segmented=True, time_constants="fractions",
+                              rest_margin_deg=20.0)
+    assert fr.status[0] == g.status[0] == 0 and g.subjects == ("S02",) and np.isnan(g.delay[0])
+    assert g.integration_error_deg[0] < 0.01 and fr.integration_error_deg[0] < 0.01
+    names = list(g.param_names)
+    same = [n for n in fr.param_names if not n.startswith("q_rest")]
+    i_r, i_g = [fr.param_names.index(n) for n in same], [names.index(n) for n in same]
+    se = fr.stderr[0, i_r]
+    assert np.all(np.abs(g.params[0, i_g] - fr.params[0, i_r]) < 0.02 * se), (g.params[0, i_g] - fr.params[0, i_r]) / se
+    np.testing.assert_allclose(g.stderr[0, i_g], se, rtol=0.02)
+    np.testing.assert_allclose(g.loss[0], fr.loss[0], rtol=1e-5)
+    # rest posture: equal up to a shift along KJ⁻¹ e4, which moves the elbow's rest angle
+    v = np.linalg.solve(fr.KJ[0], np.eye(4)[3])
+    d = g.q_rest[0] - fr.q_rest[0]
+    off = (d - d[3] / v[3] * v)[:3]
+    se_q = fr.stderr[0, [fr.param_names.index(f"q_rest[q{j}]") for j in (1, 2, 3)]]
+    assert np.all(np.abs(off) < 0.02 * se_q), off / se_q
+    assert any("q_rest[q4]" in direction for direction in g.unidentified[0])
+    # held-out repetition 8: the same predicted movements, by predict_movements on the same files
+    pr = fitting.predict_reaching(fr, reps=(8,))
+    held = [(t, r, i) for t, r, i in zip(pr.task, pr.rep, pr.index)]
+    pm = fitting.predict_movements(g, [pj.read_joint_angles(path, motion=m) for m in held])
+    assert len(pm) == len(held) >= 3 and np.all(pm.status == 0)
+    np.testing.assert_allclose(pm.q_obs, pr.q_obs, atol=1e-12)
+    # (the two optima differ by under 0.02 standard errors: 0.018° at most in these movements)
+    assert np.max(np.abs(np.rad2deg(pm.q_pred - pr.q_pred))) < 0.05
+    np.testing.assert_allclose(pm.baselines["pinv_minjerk"]["rmse_deg"], pr.baselines["pinv_minjerk"].rmse_deg,
+                               atol=0.01)

@@ -48,8 +48,16 @@ def add_fit_movements(sub) -> None:
                    help="planner: Arimoto with Eq 10's gain (default) or the minimum-jerk time-base generator")
     p.add_argument("--damping", choices=("tau0_KJ", "diagonal", "full"), default="tau0_KJ",
                    help="W = τ0 KJ (Eq 7, default), diagonal or full")
-    p.add_argument("--time-constants", choices=("seconds", "fractions"), default="seconds",
-                   help="one τ0, τ per subject in seconds (default) or as fractions of each reach's duration")
+    p.add_argument("--time-constants", choices=("seconds", "fractions", "tied"), default="seconds",
+                   help="one τ0, τ per subject in seconds (default), as fractions of each reach's duration, or "
+                   "tied (τ = τ0 = T/5, not fitted)")
+    p.add_argument("--segmented", action="store_true",
+                   help="each recording is one motion (idle time removed): no search for reaches; the first and "
+                   "last samples are the start and final postures; fractions are of the time between the onset "
+                   "and the offset at 20 %% of the peak hand speed")
+    p.add_argument("--rest-margin", type=float, default=90.0, metavar="DEG",
+                   help="the rest angles stay within each joint's recorded range widened by DEG degrees "
+                   "(default 90)")
     p.add_argument("--out", default="out_movements", help="output folder (default out_movements)")
     p.add_argument("--no-figures", action="store_true", help="no figures")
     p.set_defaults(func=_fit_movements)
@@ -83,6 +91,8 @@ def _fit_movements(args) -> int:
         pattern = re.compile(args.subject_pattern)
     except re.error as e:
         raise ValueError(f"--subject-pattern {args.subject_pattern!r} is not a regular expression ({e})") from None
+    if not (np.isfinite(args.rest_margin) and args.rest_margin >= 0.0):
+        raise ValueError(f"--rest-margin must be a finite number of degrees >= 0, got {args.rest_margin}")
     out = output_dir("--out", Path(args.out))
     chain_path = Path(args.chain)
     if not chain_path.is_file():
@@ -93,7 +103,8 @@ def _fit_movements(args) -> int:
         raise ValueError(f"--holdout {overlap[0]}: also given as a recording to fit")
     train = read_recordings_for(chain, args.recordings, pattern)
     held = read_recordings_for(chain, args.holdout, pattern)
-    fit = fit_movements(chain, train, model=args.model, damping=args.damping, time_constants=args.time_constants)
+    fit = fit_movements(chain, train, model=args.model, damping=args.damping, time_constants=args.time_constants,
+                        segmented=args.segmented, rest_margin_deg=args.rest_margin)
     write_csv(out / "movement_fit.csv", fit.summary())
     write_csv(out / "movement_parameters.csv", fit.parameter_rows())
     reach_rows = []

@@ -1,11 +1,22 @@
-"""A subject's reaches on normalised time, cut out of continuous joint-angle recordings.
+"""A subject's reaches on normalised time, cut out of continuous joint-angle recordings, or taken
+whole from recordings of one motion each.
 
-Each reach found by :func:`pmpjax.find_movements` is cut out from ``ONSET_LEAD`` before its onset
-(the hand at rest; the model's target-onset ``delay`` absorbs the fixed lead) to the next reach's
-window start (the hold on the target), in the recording's own clock, and resampled at ``SAMPLES``
-equally spaced times by linear interpolation of the recorded joint angles. Reaches cut short by
-the next one (the hand still moving when the next target appeared) are left out with their
-reason: their target is unknown.
+**Continuous recordings** (:func:`subject_reaches`). Each reach found by
+:func:`pmpjax.find_movements` is cut out from ``ONSET_LEAD`` before its onset (the hand at rest;
+the model's target-onset ``delay`` absorbs the fixed lead) to the next reach's window start (the
+hold on the target), in the recording's own clock, and resampled at ``SAMPLES`` equally spaced
+times by linear interpolation of the recorded joint angles. Reaches cut short by the next one (the
+hand still moving when the next target appeared) are left out with their reason: their target is
+unknown.
+
+**Segmented recordings** (:func:`segmented_reaches`; the HuG-MP protocol, ``fitting.fit_reaching``).
+Each recording is one motion, idle time removed: the window is the whole recording, its first
+sample the start posture and its last the final posture (the target is the hand there). The
+movement duration ``T`` is the time between the onset and the offset at ``onset`` (20 %) of the
+peak hand speed of the hand path smoothed by ``pmpjax.smooth_path`` (paper Section 2), with the
+fixed smoothing parameter ``SEGMENTED_SMOOTHING`` (the median of the GCV choices over 48 HuG-MP
+motions, for hand paths in metres against seconds); time constants given as fractions are
+fractions of ``T`` (``t_ratio = T / window``), as in the paper.
 """
 
 from __future__ import annotations
@@ -16,6 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 import pmpjax as pj
+from pmpjax.internal import fast_compile_jit
 
 #: Samples per reach on normalised time (as the HuG-MP fits).
 SAMPLES = 50
@@ -28,6 +40,10 @@ HOLD_EXTENSION = 0.5
 ONSET_LEAD = 0.25
 #: The start and end postures are the mean recorded posture over this long before them [s].
 REST_AVERAGE = 0.05
+#: Segmented recordings: ``pmpjax.smooth_path``'s λ for the hand path [m against s], and the
+#: onset/offset level as a fraction of the peak speed (options ``smoothing``, ``onset``).
+SEGMENTED_SMOOTHING = 5e-6
+SEGMENTED_ONSET = 0.2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,7 +53,9 @@ class SubjectReaches:
     the recording's clock, ``q_obs`` (B, S, n) [rad], ``duration`` (B,) [s]; ``q_start``, ``q_end``
     (B, n) [rad] the start and end postures, averaged at rest (the model's initial posture and,
     through the chain, its target);
-    ``skipped`` a list of ``(recording, t_from, t_to, reason)``."""
+    ``skipped`` a list of ``(recording, t_from, t_to, reason)``; ``t_ratio`` (B,) the duration
+    that time constants given as fractions refer to, as a fraction of the window (ones for
+    continuous recordings; ``T / window`` for segmented ones)."""
 
     subject: str
     recording: tuple[str, ...]
@@ -48,6 +66,11 @@ class SubjectReaches:
     q_start: np.ndarray
     q_end: np.ndarray
     skipped: tuple = ()
+    t_ratio: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.t_ratio is None:
+            object.__setattr__(self, "t_ratio", np.ones_like(self.duration))
 
     def __len__(self):
         return int(self.duration.shape[0])
@@ -108,6 +131,55 @@ def subject_reaches(subject: str, recordings: Sequence, chain, find_options: dic
                           np.stack([r[2] for r in rows]), np.stack([r[3] for r in rows]),
                           np.array([r[4] for r in rows]), np.stack([r[5] for r in rows]),
                           np.stack([r[6] for r in rows]), tuple(skipped))
+
+
+def segmented_reaches(subject: str, recordings: Sequence, chain, options: dict) -> SubjectReaches:
+    """The reaches of ``recordings`` of one motion each (module docstring), resampled on normalised
+    time. ``options``: ``onset`` (fraction of the peak speed, default ``SEGMENTED_ONSET``) and
+    ``smoothing`` (``pmpjax.smooth_path``'s λ; None: GCV per motion; default
+    ``SEGMENTED_SMOOTHING``). Recordings whose speed never falls below the level on one side
+    (cut by the recording), or with fewer than 5 samples, are skipped with the reason."""
+    unknown = sorted(set(options) - {"onset", "smoothing"})
+    if unknown:
+        raise ValueError(f"`find_options` of segmented recordings takes 'onset' and 'smoothing'; got {unknown}")
+    level = float(options.get("onset", SEGMENTED_ONSET))
+    lam = options.get("smoothing", SEGMENTED_SMOOTHING)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"`find_options['onset']` must lie in (0, 1), got {level!r}")
+    if lam is not None and not (np.isfinite(float(lam)) and float(lam) > 0.0):
+        raise ValueError(f"`find_options['smoothing']` must be a positive number or None, got {lam!r}")
+    rows, skipped = [], []
+    for rec in recordings:
+        t, q = np.asarray(rec.t, float), np.asarray(rec.q, float)
+        if t.shape[0] < 5:
+            skipped.append((rec.name, float(t[0]), float(t[-1]), f"too short: {t.shape[0]} samples (< 5)"))
+            continue
+        x = np.asarray(hand_positions(chain, q))
+        path = pj.smooth_path(t, x, lam=None if lam is None else float(lam))
+        a, b = pj.segment_by_speed(path.speed, threshold=level)
+        if a is None or b is None:
+            side = "onset" if a is None else "offset"
+            skipped.append((rec.name, float(t[0]), float(t[-1]), f"hand speed never falls below {level:.0%} of "
+                                                                 f"its peak before the {side} (cut by the recording)"))
+            continue
+        ts = np.linspace(t[0], t[-1], SAMPLES)
+        q_obs = np.stack([np.interp(ts, t, q[:, j]) for j in range(chain.n)], -1)
+        window = float(t[-1] - t[0])
+        rows.append((rec.name, ts, q_obs, window, float(t[b] - t[a]) / window))
+    n = chain.n
+    if not rows:
+        return SubjectReaches(subject, (), np.zeros(0, int), np.zeros((0, SAMPLES)), np.zeros((0, SAMPLES, n)),
+                              np.zeros(0), np.zeros((0, n)), np.zeros((0, n)), tuple(skipped), np.zeros(0))
+    q_obs = np.stack([r[2] for r in rows])
+    return SubjectReaches(subject, tuple(r[0] for r in rows), np.zeros(len(rows), int), np.stack([r[1] for r in rows]),
+                          q_obs, np.array([r[3] for r in rows]), q_obs[:, 0], q_obs[:, -1], tuple(skipped),
+                          np.array([r[4] for r in rows]))
+
+
+@fast_compile_jit
+def hand_positions(chain, q):
+    """``chain.fk(q)``, compiled once per chain and shape."""
+    return chain.fk(q)
 
 
 def _rest_mean(rec, t: float):

@@ -50,7 +50,8 @@ from pmpjax.internal import fast_compile_jit
 
 from .._optimise import group_jackknife_covariance, least_squares, lm_iterations, spd_size
 from . import model as mdl
-from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, subject_reaches
+from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, segmented_reaches, subject_reaches
+from .data import hand_positions as _fk
 
 #: Singular values below this fraction of the largest mark unidentified directions.
 IDENTIFIABILITY_RCOND = 1e-6
@@ -67,9 +68,10 @@ class MovementFit:
     ``subjects`` (S,); ``KJ`` (S, n, n) [Nm/rad], trace n; ``q_rest`` (S, n) [rad]; ``W`` (S, n, n)
     damping per unit τ0 (trace n; the damping of a reach is ``τ0 W``); ``tau``, ``tau0`` (S,) [s]
     (``time_constants="seconds"``) or fractions of each reach's duration (``"fractions"``; ``tau``
-    NaN for the time-base generator, whose duration fraction is ``duration``); ``delay`` (S,)
-    how long before a reach's window the target appeared (Arimoto; same unit; unseen reaches are
-    predicted with it) and ``reach_delays`` {subject: (B,)} each fitted reach's own (``delay`` plus
+    NaN for the time-base generator, whose duration fraction is ``duration``; 0.2 when
+    ``"tied"``); ``delay`` (S,) how long before a reach's window the target appeared (Arimoto;
+    same unit; unseen reaches are predicted with it; NaN for segmented recordings) and ``reach_delays``
+    {subject: (B,)} each fitted reach's own (``delay`` plus
     its fitted offset, in the order of ``reaches[subject]``); ``reach_target_offsets`` {subject:
     (B, m)} each fitted reach's target minus the hand at the end of its window (the chain's task
     units; where the model says the reach was aimed); ``converged``,
@@ -86,7 +88,8 @@ class MovementFit:
     ``integration_error_deg`` (S,) (largest joint difference against twice the steps);
     ``bound_active`` (S, 1 + n) (cond(KJ), each rest angle); ``reaches`` {subject:
     SubjectReaches} the windows fitted; ``skipped`` {subject: [(recording, t_from, t_to, reason)]};
-    ``chain`` the chain; ``joint_names``; ``model``, ``damping``, ``time_constants``.
+    ``chain`` the chain; ``joint_names``; ``model``, ``damping``, ``time_constants``, ``segmented``,
+    ``rest_margin_deg``: the options that made it.
     """
 
     subjects: tuple[str, ...]
@@ -126,6 +129,8 @@ class MovementFit:
     model: str
     damping: str
     time_constants: str
+    segmented: bool = False
+    rest_margin_deg: float = mdl.REST_MARGIN_DEG
 
     @property
     def messages(self) -> list[str]:
@@ -189,13 +194,14 @@ class MovementFit:
         return rows
 
 
-def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
+def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8, margin_deg: float = mdl.REST_MARGIN_DEG) -> dict:
     """Pad subjects' reaches to a common count (a multiple of ``bucket``; padding = copies of the
-    first reach with weight 0)."""
+    first reach with weight 0); ``lo``, ``hi`` the rest-angle bounds (the recorded range widened
+    by ``margin_deg``)."""
     B = max(len(s) for s in subjects)
     B = -(-B // bucket) * bucket
-    out = {k: [] for k in ("q_obs", "q_start", "q_end", "duration", "weight", "target", "lo", "hi")}
-    margin = np.deg2rad(mdl.REST_MARGIN_DEG)
+    out = {k: [] for k in ("q_obs", "q_start", "q_end", "duration", "t_ratio", "weight", "target", "lo", "hi")}
+    margin = np.deg2rad(margin_deg)
     for s in subjects:
         pad = B - len(s)
         idx = np.concatenate([np.arange(len(s)), np.zeros(pad, int)])
@@ -203,6 +209,7 @@ def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
         out["q_start"].append(s.q_start[idx])
         out["q_end"].append(s.q_end[idx])
         out["duration"].append(s.duration[idx])
+        out["t_ratio"].append(s.t_ratio[idx])
         out["weight"].append(np.concatenate([np.ones(len(s)), np.zeros(pad)]))
         out["lo"].append(s.q_obs.min((0, 1)) - margin)
         out["hi"].append(s.q_obs.max((0, 1)) + margin)
@@ -211,11 +218,6 @@ def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8) -> dict:
     data["amplitude"] = np.maximum(np.linalg.norm(data["target"] - np.asarray(_fk(chain, data["q_start"])), axis=-1),
                                    1e-9)
     return data
-
-
-@fast_compile_jit
-def _fk(chain, q):
-    return chain.fk(q)
 
 
 @partial(fast_compile_jit, static_argnames=("cfg",))
@@ -275,7 +277,7 @@ def _integration_error_one(th, dat, chain, cfg, steps, solver):
     """Largest joint difference [rad] of the used reaches between ``steps`` and ``2·steps``."""
     t, offsets, shift = mdl.split(th, cfg)
     p = mdl.unpack(t, cfg)
-    model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg, offsets)
+    model, planner = mdl.model_and_planner(chain, p, dat["duration"], cfg, offsets, dat["t_ratio"])
     q0, tg = dat["q_start"], dat["target"] if shift is None else dat["target"] + shift
     a = mdl.simulate(chain, model, planner, q0, tg, steps, solver).q
     b = mdl.simulate(chain, model, planner, q0, tg, 2 * steps, solver).q
@@ -331,6 +333,8 @@ def fit_movements(
     max_steps=(100, 100),
     stiffness_cond_max: float | None = mdl.STIFFNESS_COND_MAX,
     find_options: dict | None = None,
+    segmented: bool = False,
+    rest_margin_deg: float = mdl.REST_MARGIN_DEG,
 ) -> MovementFit:
     """Fit the λ0-PMP per subject to the reaches inside continuous joint-angle recordings.
 
@@ -340,16 +344,23 @@ def fit_movements(
     - ``recordings``: :class:`pmpjax.JointRecording` objects (``pmpjax.read_joint_angles``) with the
       chain's joints, grouped by their ``subject``; reaches are found by
       :func:`pmpjax.find_movements` (``find_options`` passed on), cut-short ones left out.
+    - ``segmented``: each recording is one motion, idle time removed (HuG-MP's ``.mat`` motions:
+      ``fitting.fit_reaching`` is this case): the whole recording is the window, its first and last
+      samples the start and final postures, no target-onset delay and no per-reach offsets;
+      fractions are of the movement duration between the 20 %-of-peak-speed onset and offset
+      (``find_options``: ``onset``, ``smoothing``; ``fitting._movements.data``).
     - ``model``: "lambda0" (Arimoto, Eq 8 with Eq 10's gain) or "lambda0_minjerk" (time-base
       generator); ``damping``: "tau0_KJ" (Eq 7), "diagonal" or "full"; ``time_constants``:
-      "seconds" (one τ, τ0 per subject; the default) or "fractions" (of each reach's duration).
+      "seconds" (one τ, τ0 per subject; the default), "fractions" (of each reach's duration) or
+      "tied" (``τ = τ0 = T/5``, not fitted; the paper's heuristic).
       Measured on the shipped example (two subjects, trial 1 fitted, trial 2's 12 reaches held
       out; reaches of 1.0–1.4 s): seconds 0.22° and 0.23° held-out median RMSE, fractions 0.61°
       and 0.64°, AIC lower by 670 and 210 for seconds. Those recordings were made with time constants in seconds;
       with reaches of one duration the two coincide (the planar test fits fractions).
     - ``max_steps``: Levenberg–Marquardt iterations of stage 1 (final postures) and stage 2
       (trajectories; 0: a Donders-fitted model).
-    - ``stiffness_cond_max``: bound on cond(KJ) (None: none).
+    - ``stiffness_cond_max``: bound on cond(KJ) (None: none); ``rest_margin_deg``: the rest angles
+      stay within each joint's recorded range widened by this [deg] (default a quarter turn).
 
     **Returns:** a :class:`MovementFit`. **Raises:** ``TypeError``/``ValueError`` naming the
     argument for bad options and recordings whose joints do not match the chain; ``ValueError``
@@ -368,11 +379,17 @@ def fit_movements(
     cond_max = math.inf if stiffness_cond_max is None else float(stiffness_cond_max)
     if not cond_max > 1.0:
         raise ValueError(f"`stiffness_cond_max` must be > 1 (or None), got {stiffness_cond_max!r}")
-    cfg = mdl.Config(chain.n, model, damping, time_constants, m=chain.m,
-                     cond_max=cond_max)
+    if not isinstance(segmented, bool | np.bool_):
+        raise TypeError(f"`segmented` must be True or False, got {segmented!r}")
+    margin = float(rest_margin_deg)
+    if not (math.isfinite(margin) and margin >= 0.0):
+        raise ValueError(f"`rest_margin_deg` must be a finite number >= 0, got {rest_margin_deg!r}")
+    cfg = mdl.Config(chain.n, model, damping, time_constants, m=0 if segmented else chain.m,
+                     cond_max=cond_max, delay=not segmented)
     joints = tuple(recordings[0].joint_names)
     by_subject = group_by_subject(recordings)
-    found = {s: subject_reaches(s, recs, chain, dict(find_options or {})) for s, recs in by_subject.items()}
+    reaches = segmented_reaches if segmented else subject_reaches
+    found = {s: reaches(s, recs, chain, dict(find_options or {})) for s, recs in by_subject.items()}
     usable = {s: r for s, r in found.items() if len(r) > 0}
     if not usable:
         raise ValueError("no subject has a usable reach: " + "; ".join(
@@ -380,12 +397,12 @@ def fit_movements(
     empty = [s for s in found if s not in usable]
     if empty:
         warnings.warn(f"fit_movements: no usable reach for {', '.join(empty)} (TOO_FEW_DATA)", stacklevel=2)
-    out = _fit(chain, list(usable.values()), cfg, ms)
-    return _assemble(chain, found, usable, out, cfg, joints)
+    out = _fit(chain, list(usable.values()), cfg, ms, margin)
+    return _assemble(chain, found, usable, out, cfg, joints, margin, bool(segmented))
 
 
-def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms) -> dict:
-    data = _stack(subjects, chain)
+def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg: float = mdl.REST_MARGIN_DEG) -> dict:
+    data = _stack(subjects, chain, margin_deg=margin_deg)
     S = len(subjects)
     k = spd_size(cfg.n)
     th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
@@ -445,7 +462,7 @@ def _unidentified_names(V0, names, cfg) -> tuple:
     return tuple(out)
 
 
-def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
+def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN_DEG, segmented=False) -> MovementFit:
     names_all = tuple(found)
     S_all, n = len(names_all), cfg.n
     p = mdl.n_params(cfg)
@@ -479,8 +496,10 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
         pr = jax.device_get(mdl.unpack(jnp.asarray(x), cfg))
         KJ[a], W[a], q_rest[a] = pr["KJ"], pr["W"], pr["q_rest"]
         if cfg.model == "lambda0":
-            tau[a], delay[a] = pr["a"], pr["delay"]
-            reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
+            tau[a] = pr["a"]
+            if mdl.reach_delays(cfg):  # (segmented recordings have none: NaN)
+                delay[a] = pr["delay"]
+                reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
         else:
             dur[a] = pr["a"]
         tau0[a] = pr["a0"]
@@ -510,7 +529,7 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
         w = np.linalg.eigvalsh(KJ[a])
         bound[a, 0] = math.log(w[-1] / w[0]) >= math.log(cfg.cond_max) - 3 * mdl.BOUND_WIDTH[0]
         qs = usable[s].q_obs
-        margin = np.deg2rad(mdl.REST_MARGIN_DEG)
+        margin = np.deg2rad(margin_deg)
         lo, hi = qs.min((0, 1)) - margin, qs.max((0, 1)) + margin
         bound[a, 1:] = (x[k:k + n] >= hi - 3 * mdl.BOUND_WIDTH[1]) | (x[k:k + n] <= lo + 3 * mdl.BOUND_WIDTH[1])
     stderr = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
@@ -523,13 +542,16 @@ def _assemble(chain, found, usable, out, cfg, joints) -> MovementFit:
         bic=bic, n_reaches=n_reach, n_residuals=n_res, lm_steps=lm, solver=out["solver"],
         steps_per_sample=int(out["steps"]), integration_error_deg=err, bound_active=bound,
         reaches={s: found[s] for s in names_all}, skipped={s: list(found[s].skipped) for s in names_all},
-        chain=chain, joint_names=joints, model=cfg.model, damping=cfg.damping, time_constants=cfg.time_constants)
+        chain=chain, joint_names=joints, model=cfg.model, damping=cfg.damping, time_constants=cfg.time_constants,
+        segmented=segmented, rest_margin_deg=margin_deg)
 
 
-def subject_model(fit: MovementFit, subject: str, duration):
-    """The fitted subject's model and planner for reaches of ``duration`` (B,) [s] (normalised time)."""
+def subject_model(fit: MovementFit, subject: str, duration, t_ratio=None):
+    """The fitted subject's model and planner for reaches of ``duration`` (B,) [s] (normalised time;
+    ``t_ratio`` (B,): the duration fractions refer to, per unit window)."""
     a = fit.subject_index(subject)
-    cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants)
+    cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants, delay=not fit.segmented)
     p = mdl.unpack(jnp.asarray(fit.params[a]), cfg)
-    return mdl.model_and_planner(fit.chain, p, jnp.asarray(duration, float), cfg), cfg
+    ratio = None if t_ratio is None else jnp.asarray(t_ratio, float)
+    return mdl.model_and_planner(fit.chain, p, jnp.asarray(duration, float), cfg, t_ratio=ratio), cfg
 

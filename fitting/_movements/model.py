@@ -9,10 +9,13 @@
   ``"lambda0_minjerk"`` the minimum-jerk time-base generator over ``d`` of the reach;
 - time constants ``log τ``, ``log τ0`` (time-base generator: ``log d``, ``log τ0``), in seconds
   (``time_constants="seconds"``: the same τ, τ0 for reaches of every duration) or as fractions of
-  each reach's duration (``"fractions"``);
-- Arimoto's ``delay`` (same unit): how long before the window's start (the rest detected before
-  the onset) the target appeared; Eq 8's gain rises as ``t²`` at first, so the hand's speed
-  reaches the detection threshold tens of milliseconds after the target's onset.
+  each reach's duration (``"fractions"``: of the window; of the movement duration ``T`` for
+  segmented recordings, ``fitting._movements.data``), or not fitted (``"tied"``: ``τ = τ0 = T/5``,
+  the paper's heuristic, and the generator's ``d`` the whole window);
+- Arimoto's ``delay`` (same unit; continuous recordings only, ``Config.delay``): how long before
+  the window's start (the rest detected before the onset) the target appeared; Eq 8's gain rises
+  as ``t²`` at first, so the hand's speed reaches the detection threshold tens of milliseconds
+  after the target's onset. A segmented recording begins with its motion: no delay.
 
 **Per-reach nuisance parameters** (stage 2 only; ``B·k`` after the subject's ``p``): each reach's
 delay offset ``δ_b`` (Arimoto; the lead from the target's onset to the detected onset varies from
@@ -46,7 +49,7 @@ from .data import SAMPLE_TIMES, SAMPLES
 
 MODELS = ("lambda0", "lambda0_minjerk")
 DAMPINGS = ("tau0_KJ", "diagonal", "full")
-TIME_CONSTANTS = ("seconds", "fractions")
+TIME_CONSTANTS = ("seconds", "fractions", "tied")
 GAIN_CAP = 60.0  # time-base generator's task-velocity cap [1 / reach duration]
 FINAL_WEIGHT = 1.0
 #: Bounds (smooth softplus penalties, as ``fit_reaching``): cond(KJ) and the rest angles within
@@ -74,6 +77,7 @@ class Config:
     damping: str
     time_constants: str
     m: int = 0  # task coordinates of the per-reach target offsets (0: the targets as recorded)
+    delay: bool = True  # Arimoto: fit the target-onset delay and its per-reach offsets (continuous recordings)
     cond_max: float = STIFFNESS_COND_MAX
     ftol: float = 1e-8
     xtol: float = 1e-8
@@ -86,7 +90,12 @@ def n_postural(cfg: Config) -> int:
 
 def n_params(cfg: Config) -> int:
     extra = {"tau0_KJ": 0, "diagonal": cfg.n - 1, "full": spd_size(cfg.n)}[cfg.damping]
-    return n_postural(cfg) + extra + (3 if cfg.model == "lambda0" else 2)
+    return n_postural(cfg) + extra + n_timing(cfg)
+
+
+def n_timing(cfg: Config) -> int:
+    """Timing parameters: the two time constants (none when tied), then the delay (Arimoto)."""
+    return (0 if cfg.time_constants == "tied" else 2) + int(reach_delays(cfg))
 
 
 def param_names(cfg: Config, joints: tuple[str, ...]) -> tuple[str, ...]:
@@ -100,15 +109,17 @@ def param_names(cfg: Config, joints: tuple[str, ...]) -> tuple[str, ...]:
     elif cfg.damping == "full":
         names += tuple(f"S_W[{joints[i]},{joints[j]}]" for i, j in pairs)
     unit = "s" if cfg.time_constants == "seconds" else "T"
-    names += ((f"log(tau/{unit})",) if cfg.model == "lambda0" else ("log(duration/T)",)) + (f"log(tau0/{unit})",)
-    if cfg.model == "lambda0":
+    if cfg.time_constants != "tied":
+        names += ((f"log(tau/{unit})",) if cfg.model == "lambda0" else ("log(duration/T)",)) + (f"log(tau0/{unit})",)
+    if reach_delays(cfg):
         names += ("delay [s]" if cfg.time_constants == "seconds" else "delay/T",)
     return names
 
 
 def reach_delays(cfg: Config) -> bool:
-    """Whether stage 2 fits a delay offset per reach (Arimoto's planner)."""
-    return cfg.model == "lambda0"
+    """Whether the fit has a target-onset delay, and stage 2 a delay offset per reach (Arimoto's
+    planner on continuous recordings)."""
+    return cfg.model == "lambda0" and cfg.delay
 
 
 def unpack(theta, cfg: Config) -> dict:
@@ -127,8 +138,13 @@ def unpack(theta, cfg: Config) -> dict:
     else:
         out["W"] = stiffness_from_params(theta[k:k + spd_size(n)], n, float(n))
         k += spd_size(n)
-    out["a"], out["a0"] = jnp.exp(theta[k]), jnp.exp(theta[k + 1])
-    out["delay"] = theta[k + 2] if cfg.model == "lambda0" else jnp.zeros((), theta.dtype)
+    if cfg.time_constants == "tied":
+        out["a"] = jnp.full((), 1.0 if cfg.model == "lambda0_minjerk" else START_FRACTION, theta.dtype)
+        out["a0"] = jnp.full((), START_FRACTION, theta.dtype)
+    else:
+        out["a"], out["a0"] = jnp.exp(theta[k]), jnp.exp(theta[k + 1])
+        k += 2
+    out["delay"] = theta[k] if reach_delays(cfg) else jnp.zeros((), theta.dtype)
     return out
 
 
@@ -140,14 +156,19 @@ def stage2_start(theta1, cfg: Config):
     parts = [theta1, damping_start(KJ, cfg.damping)]
     t0 = math.log(START_SECONDS if cfg.time_constants == "seconds" else START_FRACTION)
     first = 0.0 if cfg.model == "lambda0_minjerk" else t0
-    parts.append(jnp.array([first, t0] + ([0.0] if cfg.model == "lambda0" else []), theta1.dtype))
+    timing = ([first, t0] if cfg.time_constants != "tied" else []) + ([0.0] if reach_delays(cfg) else [])
+    parts.append(jnp.array(timing, theta1.dtype))
     return jnp.concatenate(parts)
 
 
-def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None):
+def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None, t_ratio=None):
     """λ0-PMP and planner of reaches of ``duration`` (B,) [s] on normalised time; ``offsets`` (B,)
-    the reaches' delay offsets (None: the subject's delay for every reach, as for unseen reaches)."""
-    scale = 1.0 / duration if cfg.time_constants == "seconds" else jnp.ones_like(duration)
+    the reaches' delay offsets (None: the subject's delay for every reach, as for unseen reaches);
+    ``t_ratio`` (B,) the duration fractions refer to, per unit window (None: ones)."""
+    if cfg.time_constants == "seconds":
+        scale = 1.0 / duration
+    else:
+        scale = jnp.ones_like(duration) if t_ratio is None else jnp.asarray(t_ratio, duration.dtype)
     tau0 = p["a0"] * scale
     W = tau0[:, None, None] * p["W"][None]
     model = pj.Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=W)
@@ -155,7 +176,7 @@ def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None):
         delay = p["delay"] if offsets is None else p["delay"] + offsets
         planner = pj.ArimotoPlanner(k=None, tau=p["a"] * scale, tau0=tau0, delay=delay * scale)
     else:
-        d = p["a"] * (jnp.ones_like(duration) if cfg.time_constants == "fractions" else scale)
+        d = p["a"] * (scale if cfg.time_constants == "seconds" else jnp.ones_like(duration))
         planner = pj.MinimumJerkPlanner(duration=jnp.minimum(d, 1.0), gain_cap=GAIN_CAP)
     return model, planner
 
@@ -230,7 +251,7 @@ def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str
     q_obs, weight = data["q_obs"], data["weight"]
     th, offsets, shift = split(theta, cfg)
     p = unpack(th, cfg)
-    model, planner = model_and_planner(chain, p, data["duration"], cfg, offsets)
+    model, planner = model_and_planner(chain, p, data["duration"], cfg, offsets, data["t_ratio"])
     target = data["target"] if shift is None else data["target"] + shift
     traj = simulate(chain, model, planner, data["q_start"], target, steps, solver)
     sw = jnp.sqrt(weight)

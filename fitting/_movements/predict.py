@@ -18,7 +18,7 @@ from pmpjax import Status
 from pmpjax.internal import without_unit_checks
 
 from . import model as mdl
-from .data import SAMPLE_TIMES, SAMPLES, check_recordings, group_by_subject, subject_reaches
+from .data import SAMPLE_TIMES, SAMPLES, check_recordings, group_by_subject, segmented_reaches, subject_reaches
 from .fit import MovementFit, _fk, subject_model
 
 BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
@@ -116,7 +116,8 @@ def _errors(q_pred, q_obs, status):
 def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None = None) -> MovementPrediction:
     """Predict every reach of held-out ``recordings`` with each subject's fitted λ0-PMP.
 
-    Each reach (found as in :func:`fit_movements`) is simulated from its recorded start posture to
+    Each reach (found as in :func:`fit_movements`; each recording one motion for a fit of
+    segmented recordings) is simulated from its recorded start posture to
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
     step count.
 
@@ -147,7 +148,8 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
         if subject not in fit.subjects or not np.all(np.isfinite(fit.params[fit.subject_index(subject)])):
             problems[subject] = f"{subject}: not fitted (subjects with parameters: {', '.join(fit.subjects)})"
             continue
-        sr = subject_reaches(subject, recs, chain, dict(find_options or {}))
+        reaches = segmented_reaches if fit.segmented else subject_reaches
+        sr = reaches(subject, recs, chain, dict(find_options or {}))
         for rec, a, b, why in sr.skipped:
             skipped.setdefault(rec, []).append((a, b, why))
         if len(sr) == 0:
@@ -155,7 +157,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
         q0 = sr.q_start
         target = np.asarray(_fk(chain, sr.q_end))
         with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
-            (model, planner), _ = subject_model(fit, subject, sr.duration)
+            (model, planner), _ = subject_model(fit, subject, sr.duration, sr.t_ratio)
             tr = mdl.simulate(chain, model, planner, q0, target, fit.steps_per_sample, fit.solver)
         rows["q_pred"].append(np.asarray(tr.q))
         rows["status"].append(np.asarray(tr.status).astype(int))
