@@ -138,3 +138,32 @@ def test_chain_is_a_pytree_of_the_mjx_models_arrays():
     q = np.full(5, 0.3)
     np.testing.assert_allclose(np.asarray(fk(b, q)), np.asarray(fk(a, q)), atol=0)
     assert fk._cache_size() == 1  # equal chains share one compile
+
+
+@pytest.mark.parametrize("spoil, expect", [
+    (lambda x: x.replace("</mujoco>", ""), r"not a loadable MJCF model: XML parse error \d+: .* Line number=\d+$"),
+    (lambda x: x.replace('<joint name="wrist_flexion" axis="1 0 0" range="-70 80"/>',
+                         '<joint name="wrist_flexion" type="ball"/>'),
+     r"takes hinge and slide joints only; the model has the joint\(s\) 'wrist_flexion' \(ball\)$"),
+    (lambda x: x.replace('<site name="hand"', '<site name="finger"'),
+     r"`site` 'hand' is not a site of the model; its sites: \['finger'\]$"),
+    ("folder", r"is a folder, not an MJCF file$"),
+    ("missing", r"no such file$"),
+    ("mot", r"not a loadable MJCF model: MuJoCo reads MJCF from \.xml files$"),
+], ids=["malformed", "ball-joint", "no-such-site", "folder", "missing", "not-xml"])
+def test_a_model_that_cannot_be_a_chain_is_refused_in_one_line_naming_its_file(tmp_path, spoil, expect):
+    """The file first, then the reason (MuJoCo's multi-line messages joined into one line)."""
+    import re
+
+    path = tmp_path / "arm.xml"
+    if spoil == "folder":
+        path.mkdir()
+    elif spoil == "mot":
+        path = tmp_path / "S1_trial1.mot"
+        path.write_text(Path(ARM5).read_text())
+    elif spoil != "missing":
+        path.write_text(spoil(Path(ARM5).read_text()))
+    with pytest.raises(ValueError) as e:
+        pj.MjcfChain(path, "hand")
+    msg = str(e.value)
+    assert msg.startswith(f"{path}: ") and "\n" not in msg and re.search(expect, msg), msg

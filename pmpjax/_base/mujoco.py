@@ -17,8 +17,11 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import os
 import sys
 from typing import Any
+
+from .validate import MissingFileError
 
 _WARP_PROBE_LINES = ("Failed to import warp:", "Failed to import mujoco_warp:")
 
@@ -57,22 +60,30 @@ def load_spec(xml_or_model, *, name: str = "xml_or_model"):
     """``(spec, model)`` for an MJCF path or string (``spec`` a ``mujoco.MjSpec``), or
     ``(None, model)`` for a ``mujoco.MjModel`` (a compiled model has no editable spec).
 
-    Raises ``TypeError`` for other types and ``ValueError`` naming ``name`` (with MuJoCo's
-    message: file, line and column) for files or strings MuJoCo cannot load.
+    Raises ``TypeError`` for other types and a one-line ``ValueError`` for files or strings
+    MuJoCo cannot load: a file's error starts with its path (a folder, a missing file and a file
+    MuJoCo cannot read say so), a string's with ``name``; MuJoCo's message (line, element) follows.
     """
     mujoco = import_mujoco()
     if isinstance(xml_or_model, mujoco.MjModel):
         return None, xml_or_model
     if not isinstance(xml_or_model, str):
         raise TypeError(f"`{name}` must be a path, MJCF string or mujoco.MjModel, got {type(xml_or_model).__name__}")
+    is_text = xml_or_model.lstrip().startswith("<")
+    where = f"`{name}`" if is_text else xml_or_model
+    if not is_text:
+        if os.path.isdir(xml_or_model):
+            raise ValueError(f"{where}: is a folder, not an MJCF file")
+        if not os.path.isfile(xml_or_model):
+            raise MissingFileError(f"{where}: no such file")
     try:
-        if xml_or_model.lstrip().startswith("<"):
-            spec = mujoco.MjSpec.from_string(xml_or_model)
-        else:
-            spec = mujoco.MjSpec.from_file(xml_or_model)
+        spec = mujoco.MjSpec.from_string(xml_or_model) if is_text else mujoco.MjSpec.from_file(xml_or_model)
         return spec, spec.compile()
     except ValueError as e:
-        raise ValueError(f"`{name}` is not a loadable MJCF model: {e}") from e
+        why = " ".join(str(e).split())  # (MuJoCo's messages span several lines)
+        if "could not find decoder" in why:
+            why = "MuJoCo reads MJCF from .xml files"
+        raise ValueError(f"{where}: not a loadable MJCF model: {why}") from e
 
 
 def load_mj_model(xml_or_model, *, name: str = "xml_or_model"):

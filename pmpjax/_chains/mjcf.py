@@ -46,6 +46,14 @@ def _mj_model(xml_or_model):
     return load_mj_model(os.fspath(xml_or_model) if isinstance(xml_or_model, os.PathLike) else xml_or_model)
 
 
+def _source(xml_or_model) -> str:
+    """How errors name the model: its file, else the argument."""
+    if isinstance(xml_or_model, os.PathLike) or (isinstance(xml_or_model, str)
+                                                 and not xml_or_model.lstrip().startswith("<")):
+        return os.fspath(xml_or_model)
+    return "`xml_or_model`"
+
+
 @pytree_dataclass
 class Kinematics:
     """Frames at one posture (the ``mjx.Data`` fields of the same names): ``xpos`` (nbody, 3),
@@ -319,14 +327,19 @@ class MjcfChain(Chain):
     def __init__(self, xml_or_model, site: str):
         mujoco = import_mujoco()
         m = _mj_model(xml_or_model)
+        source = _source(xml_or_model)
         if not isinstance(site, str):
             raise TypeError(f"`site` must be a site name (str), got {type(site).__name__}")
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)
         if sid < 0:
             names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) for i in range(m.nsite)]
-            raise ValueError(f"`site` '{site}' is not a site of the model; sites: {names}")
-        if m.nq != m.nv or m.nq == 0:
-            raise ValueError("`xml_or_model` must have only hinge/slide joints (nq == nv > 0)")
+            raise ValueError(f"{source}: `site` '{site}' is not a site of the model; its sites: {names}")
+        kinds = {int(mujoco.mjtJoint.mjJNT_FREE): "free", int(mujoco.mjtJoint.mjJNT_BALL): "ball"}
+        other = [f"'{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or j}' ({kinds[int(t)]})"
+                 for j, t in enumerate(m.jnt_type) if int(t) in kinds]
+        if other or m.nq == 0:
+            raise ValueError(f"{source}: an MjcfChain takes hinge and slide joints only; the model has "
+                             + (f"the joint(s) {', '.join(other)}" if other else "no joints"))
         # Reach: summed offsets from the outermost jointed body (its first joint) out to the site.
         path, b = [], int(m.site_bodyid[sid])
         while b > 0:
@@ -334,7 +347,7 @@ class MjcfChain(Chain):
             b = int(m.body_parentid[b])
         jointed = [b for b in path if m.body_jntnum[b] > 0]
         if not jointed:
-            raise ValueError(f"`site` '{site}' is not moved by any joint")
+            raise ValueError(f"{source}: `site` '{site}' is not moved by any joint")
         root = jointed[-1]
         reach = float(np.linalg.norm(m.site_pos[sid])) + float(np.linalg.norm(m.jnt_pos[m.body_jntadr[root]]))
         reach += sum(float(np.linalg.norm(m.body_pos[b])) for b in path[: path.index(root)])
