@@ -3,6 +3,7 @@
 import csv
 import json
 import types
+import warnings
 from importlib import resources
 
 import numpy as np
@@ -397,3 +398,66 @@ def test_the_captured_movements_line_ends_without_a_dangling_colon():
     assert PointingPrediction.table(pred).splitlines() == [
         "s1: model captures A_net of 1 of 2 movements (50 %; 2 tested): out-N",
         "s2: model captures A_net of 0 of 2 movements (0 %; 2 tested)"]
+
+
+@pytest.fixture
+def no_movement_fit(monkeypatch):
+    """fit-movements up to its fit: reaching fit_movements fails the test (the refusals below come first)."""
+    from fitting import _movements
+
+    def fit(*a, **k):
+        raise AssertionError("fit_movements was reached")
+
+    monkeypatch.setattr(_movements, "fit_movements", fit)
+
+
+def test_fit_movements_refuses_before_its_fit_a_held_out_subject_a_slide_joint_and_a_folder(
+        tmp_path, capsys, no_movement_fit):
+    """A held-out recording of a subject with no recording to fit (predicted after minutes of fitting,
+    then refused), a chain with a slide joint (whose metres a .mot in degrees would convert as angles)
+    and a folder given as a recording are refused at once, each naming the file and the reason."""
+    from pathlib import Path
+
+    arm, reach = example("arm5.xml"), Path(example("reaching"))
+    s3 = tmp_path / "S3_trial2.mot"
+    s3.write_text((reach / "S1_trial2.mot").read_text())
+    slide = tmp_path / "slide.xml"
+    slide.write_text(Path(arm).read_text().replace('<joint name="elbow_flexion" axis="0 -1 0" range="0 150"/>',
+                                                   '<joint name="elbow_flexion" type="slide" axis="0 -1 0"/>'))
+    (tmp_path / "trials").mkdir()
+    cases = [
+        ([arm, str(reach / "S1_trial1.mot"), "--holdout", str(s3)],
+         f"--holdout {s3}: its subject 'S3' has no recording to fit (subjects fitted: S1;"),
+        ([str(slide), str(reach / "S1_trial1.mot")],
+         f"--chain {slide}: slide joint(s) 'elbow_flexion': fit-movements fits joint angles"),
+        ([arm, str(tmp_path / "trials")], f"{tmp_path / 'trials'}: is a directory, not a file"),
+        ([str(tmp_path), str(reach / "S1_trial1.mot")], f"--chain {tmp_path}: is a folder, not an MJCF file"),
+    ]
+    for (chain, *rest), expect in cases:
+        assert cli.main(["fit-movements", "--chain", chain, "--site", "hand", *rest,
+                         "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and f"pmpjax fit-movements: error: {expect}" in err, err
+
+
+def test_radians_declared_as_degrees_warn(tmp_path):
+    """A .sto in radians whose header says inDegrees=yes reads as reaches of a few degrees, which
+    the reach finder then drops as too slow; the reader says what is likely wrong."""
+    from pathlib import Path
+
+    sto = Path(example("reaching")) / "S1_trial1.sto"
+    path = tmp_path / "S1_trial1.sto"
+    path.write_text(sto.read_text().replace("inDegrees=no", "inDegrees=yes"))
+    with pytest.warns(UserWarning, match=r"S1_trial1\.sto: the angles are declared in degrees \('inDegrees=yes'\), "
+                      r"but every value lies within ±π degrees \(largest [\d.]+°\): radians\? If so, set "
+                      r"'inDegrees=no'"):
+        pj.read_joint_angles(path)
+    csv_path = tmp_path / "S1.csv"
+    csv_path.write_text("# units: deg\ntime,a,b\n0,0.1,0.2\n0.01,0.2,-1.5\n")
+    with pytest.warns(UserWarning, match=r"declared in degrees \('_deg' names or '# units: deg'\).*largest 1\.5°"):
+        pj.read_joint_angles(csv_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pj.read_joint_angles(Path(example("reaching")) / "S1_trial1.mot")  # (degrees beyond ±π: no warning)
+        csv_path.write_text("# units: deg\ntime,a,b\n0,0.1,0.2\n0.01,0.2,-4\n")
+        pj.read_joint_angles(csv_path)

@@ -96,11 +96,23 @@ def _fit_movements(args) -> int:
     out = output_dir("--out", Path(args.out))
     chain_path = Path(args.chain)
     if not chain_path.is_file():
-        raise ValueError(f"--chain {chain_path}: no such file")
+        raise ValueError(f"--chain {chain_path}: " + ("is a folder, not an MJCF file" if chain_path.is_dir()
+                                                        else "no such file"))
     chain = pj.MjcfChain(chain_path, args.site)
+    mx = chain.mjx_model  # (hinge: MuJoCo's mjJNT_HINGE = 3; the chain has hinges and slides only)
+    kinds = np.asarray(mx.jnt_type)[np.argsort(np.asarray(mx.jnt_qposadr))]
+    slides = [name for name, kind in zip(chain.joint_names or range(chain.n), kinds) if int(kind) != 3]
+    if slides:
+        raise ValueError(f"--chain {chain_path}: slide joint(s) {', '.join(map(repr, slides))}: fit-movements "
+                         "fits joint angles, so every joint must be a hinge")
     overlap = sorted(set(map(str, args.recordings)) & set(map(str, args.holdout)))
     if overlap:
         raise ValueError(f"--holdout {overlap[0]}: also given as a recording to fit")
+    fitted = {_subject(Path(p), pattern) for p in args.recordings}
+    for p in args.holdout:
+        if _subject(Path(p), pattern) not in fitted:
+            raise ValueError(f"--holdout {p}: its subject {_subject(Path(p), pattern)!r} has no recording to fit "
+                             f"(subjects fitted: {', '.join(sorted(fitted))}; --subject-pattern names them)")
     train = read_recordings_for(chain, args.recordings, pattern)
     held = read_recordings_for(chain, args.holdout, pattern)
     fit = fit_movements(chain, train, model=args.model, damping=args.damping, time_constants=args.time_constants,

@@ -20,7 +20,8 @@ Header lines up to ``endheader``; ``key=value`` lines are read (``inDegrees``, `
 ``time``, and one row per sample, fields separated by tabs or spaces. ``inDegrees=yes`` means
 degrees (converted to radians), ``no`` radians. **Without an ``inDegrees`` line degrees are
 assumed** (OpenSim's inverse kinematics writes its ``.mot`` output in degrees), with a warning when
-every selected value lies within ±π (the data then look like radians). ``nRows``/``nColumns``
+every selected value lies within ±π (the data then look like radians); declared degrees (here or in
+a CSV) whose every value lies within ±π degrees warn the same way. ``nRows``/``nColumns``
 (the latter counting ``time``) are checked against the data when present; a ``DataType`` other
 than ``double`` is refused. Columns named ``*_tx``, ``*_ty``, ``*_tz`` are OpenSim's translational
 coordinates [m]: they are not angles, so ``joints=None`` leaves them out (listed in
@@ -195,6 +196,8 @@ def read_joint_angles(path, *, subject: str | None = None, joints=None, max_gap:
     """
     path = as_path("path", path)
     ext = path.suffix.lower()
+    if path.is_dir():
+        input_file("path", path)  # (a folder is refused as one, whatever its name)
     if ext not in FORMATS:
         raise ValueError(f"`path` must end in {', '.join(FORMATS)}, got {os.fspath(path)!r}")
     if subject is not None and (not isinstance(subject, str) or not subject):
@@ -483,6 +486,13 @@ def _build(path, table: _Table, subject, name, wanted, max_gap, sample_tol) -> J
     _check_time(path, table, t, sample_tol)
     q = np.stack([_column(path, table, table.col[i], table.raw[i], allow_nan=True) for i in sel], -1)
     degrees = [table.degrees[i] for i in sel]
+    declared = [j for j, d in enumerate(degrees) if d is True]
+    if declared and np.isfinite(q[:, declared]).any() and np.nanmax(np.abs(q[:, declared])) <= np.pi:
+        peak = np.nanmax(np.abs(q[:, declared]))
+        how, fix = (("'inDegrees=yes'", "set 'inDegrees=no' in the header") if path.suffix.lower() in (".mot", ".sto")
+                    else ("'_deg' names or '# units: deg'", "declare radians ('_rad' names or '# units: rad')"))
+        warnings.warn(f"{path}: the angles are declared in degrees ({how}), but every value lies within ±π "
+                      f"degrees (largest {peak:.3g}°): radians? If so, {fix}", UserWarning, stacklevel=3)
     if any(d is None for d in degrees):  # OpenSim header without inDegrees: degrees assumed
         peak = np.nanmax(np.abs(q)) if np.isfinite(q).any() else np.nan
         if peak <= np.pi:
