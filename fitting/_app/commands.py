@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pmpjax._app import example_help, plain, plural, positive_int
+from pmpjax._app import example_help, plural, positive_int
 from pmpjax.internal import output_dir, write_json
 
 from .._ik import read_ik_file
@@ -74,7 +74,9 @@ def add_ik_weights(sub) -> None:
     p = sub.add_parser(
         "ik-weights", help="estimate IK weights (Khoramshahi et al. 2022, Algorithm 1) from a data file",
         description="Estimate the IK weights of every item (participant, condition, target) of a data file: "
-        + plain(read_ik_file.__doc__.split("\n\n")[0]),
+        "the paper's .mat layout (v5 or v7.3), an NPZ with arrays qdot (B, K, n), xdot (B, K, m), J (B, K, m, n) "
+        "and optionally mask (B, K), or a CSV with columns item, qdot_1..n, xdot_1..m and J_r_c (row r, column c "
+        "of the Jacobian), one row per sample.",
         epilog=example_help("ik_example.csv"),
     )
     p.add_argument("file", help=".mat (the paper's layout), .npz or .csv")

@@ -31,7 +31,7 @@ def add_fit_movements(sub) -> None:
         "the part of its name matched by --subject-pattern (default: before the first '_', so "
         "S1_trial1.mot belongs to S1). Writes movement_fit.csv/.json, movement_parameters.csv, reaches.csv, "
         "and with --holdout movement_predictions.csv, movement_prediction_summary.csv and one figure per "
-        "subject. Exit status 0: every subject converged; 1: some did not (results are written); 2: bad input.",
+        "subject.",
         epilog=f"Example (synthetic recordings on a 5-joint arm): pmpjax fit-movements --chain {here / 'arm5.xml'} "
         f"--site hand {here / 'reaching' / 'S1_trial1.mot'} {here / 'reaching' / 'S2_trial1.mot'} --holdout "
         f"{here / 'reaching' / 'S1_trial2.mot'} {here / 'reaching' / 'S2_trial2.mot'} --out out_movements",

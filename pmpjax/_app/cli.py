@@ -55,6 +55,15 @@ OUT/_logs/PART.log, kept only if not empty. JAX's compilation cache ($PMPJAX_CAC
 ~/.cache/pmpjax/jax; --no-cache turns it off) lets a second run skip compiling."""
 
 
+class _KeepBlocks(argparse.HelpFormatter):
+    """Help text wrapped to the terminal, except paragraphs laid out by hand (with line breaks,
+    such as :data:`EXIT_STATUS`), which are kept as written."""
+
+    def _fill_text(self, text, width, indent):
+        return "\n\n".join(p if "\n" in p else super(_KeepBlocks, self)._fill_text(p, width, indent)
+                           for p in text.split("\n\n"))
+
+
 class UserError(Exception):
     """Bad input from the command line: printed as one line, exit status 2."""
 
@@ -102,6 +111,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate_command(sub)
     for name, ep in _commands().items():
         ep.load()(sub)
+    for p in sub.choices.values():  # one exit-status policy, in every command's --help
+        if EXIT_STATUS not in (p.epilog or ""):
+            p.epilog = f"{p.epilog}\n\n{EXIT_STATUS}" if p.epilog else EXIT_STATUS
+            if p.formatter_class is argparse.HelpFormatter:
+                p.formatter_class = _KeepBlocks
     return parser
 
 
