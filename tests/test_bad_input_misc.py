@@ -59,3 +59,20 @@ def test_pointing_fits_reject_bad_analysis_and_parameters():
     for f in (fitting.predict_pointing, fitting.fit_time_constants):
         with pytest.raises((TypeError, ValueError), match="analysis"):
             f({"not": "an analysis"}, KJ, Q0)
+
+
+def test_joint_angles_in_degrees_are_refused_as_radians(tmp_path):
+    """A JointRecording built from degrees (fit_movements then fitted reaches of '108 rad') and a
+    file whose degrees go beyond a full turn are refused, naming the joint, time or line and column."""
+    t = np.arange(6) * 0.01
+    q = np.zeros((6, 2))
+    q[3, 1] = 108.1
+    with pytest.raises(ValueError, match=r"^JointRecording\(<memory>\): `q` \[rad\] of joint 'elbow' is 108\.1 at "
+                       r"t = 0\.03 s, beyond a full turn \(±2π\): degrees\? 108\.1° is 1\.887 rad"):
+        pj.JointRecording("S1", "trial1", t, q, ("shoulder", "elbow"))
+    path = tmp_path / "S1_trial1.csv"
+    path.write_text("time,shoulder_deg,elbow_deg\n" + "".join(f"{k / 100},10,{400 if k == 3 else 90}\n"
+                                                               for k in range(6)))
+    with pytest.raises(ValueError, match=r"S1_trial1\.csv: line 5, column 3 \('elbow_deg'\): 400° is beyond a full "
+                       r"turn \(±360°\), no joint angle$"):
+        pj.read_joint_angles(path)

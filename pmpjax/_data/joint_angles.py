@@ -98,11 +98,12 @@ class JointRecording:
     """One continuous trial of joint angles (T samples, n joints).
 
     ``subject`` subject name; ``name`` the recording's name (the file's stem); ``t`` (T,) sample
-    times [s], strictly increasing, evenly sampled; ``q`` (T, n) joint angles [rad], finite;
-    ``joint_names`` (n,) names of the columns of ``q``; ``fs`` sampling rate [Hz] (default
-    ``1 / median(diff(t))``); ``ignored_columns`` the file's columns not read; ``filled_gaps``
-    ``(joint, t_first, t_last)`` [s] of each run of missing samples that was filled by linear
-    interpolation; ``source`` the file read (``"<memory>"`` when built from arrays).
+    times [s], strictly increasing, evenly sampled; ``q`` (T, n) joint angles [rad], finite and
+    within a full turn (±2π; larger values are degrees); ``joint_names`` (n,) names of the columns
+    of ``q``; ``fs`` sampling rate [Hz] (default ``1 / median(diff(t))``); ``ignored_columns`` the
+    file's columns not read; ``filled_gaps`` ``(joint, t_first, t_last)`` [s] of each run of
+    missing samples that was filled by linear interpolation; ``source`` the file read
+    (``"<memory>"`` when built from arrays).
 
     Build one from arrays as ``JointRecording(subject, name, t, q, joint_names)``; the fields are
     validated (``ValueError`` naming the field).
@@ -144,6 +145,11 @@ class JointRecording:
             raise ValueError(f"{where}: `t` must be finite and strictly increasing")
         if not np.all(np.isfinite(q)):
             raise ValueError(f"{where}: `q` contains NaN or inf")
+        if np.any(np.abs(q) > _RAD_LIMIT):
+            k, j = np.unravel_index(int(np.argmax(np.abs(q) > _RAD_LIMIT)), q.shape)
+            v = q[k, j]
+            raise ValueError(f"{where}: `q` [rad] of joint '{names[j]}' is {v:.4g} at t = {t[k]:.4g} s, beyond a "
+                             f"full turn (±2π): degrees? {v:.4g}° is {np.deg2rad(v):.4g} rad (np.deg2rad)")
         fs = 1.0 / float(np.median(np.diff(t))) if self.fs is None else self.fs
         if isinstance(fs, bool) or not isinstance(fs, int | float | np.number) or not (np.isfinite(fs) and fs > 0):
             raise ValueError(f"{where}: `fs` must be a positive sampling rate [Hz], got {fs!r}")
@@ -510,6 +516,10 @@ def _build(path, table: _Table, subject, name, wanted, max_gap, sample_tol) -> J
             raise ValueError(f"{path}: line {table.lines[k]}, column {table.col[i] + 1} ({table.raw[i]!r}): "
                              f"{float(col[k])!r} rad is beyond ±2π: these look like degrees; if they are, {how}")
     q = np.where(np.asarray(degrees)[None, :], np.deg2rad(q), q)
+    if np.any(np.abs(q) > _RAD_LIMIT):  # (degrees beyond a full turn: radian columns are refused above)
+        k, j = np.unravel_index(int(np.argmax(np.abs(q) > _RAD_LIMIT)), q.shape)
+        raise ValueError(f"{path}: line {table.lines[k]}, column {table.col[sel[j]] + 1} ({table.raw[sel[j]]!r}): "
+                         f"{np.rad2deg(q[k, j]):.6g}° is beyond a full turn (±360°), no joint angle")
     names = tuple(table.labels[i] for i in sel)
     if _chain_names_match(path, table, wanted):
         names = tuple(wanted.joint_names)
