@@ -359,6 +359,8 @@ WORK = {
     "analyze-pointing": (["pointing_example.csv"], "fitting._pointing", "analyze_pointing"),
     "simulate": (["simulate_figure3.toml"], "pmpjax", "simulate"),
     "sweep": (["sweep_figure3.toml"], "fitting._sweep", "sweep"),
+    "fit-movements": (["reaching/S1_trial1.mot", "--chain", example("arm5.xml"), "--site", "hand"],
+                      "fitting._movements", "fit_movements"),
     "reproduce": ([], None, None),
 }
 
@@ -463,3 +465,25 @@ def test_radians_declared_as_degrees_warn(tmp_path):
         pj.read_joint_angles(Path(example("reaching")) / "S1_trial1.mot")  # (degrees beyond ±π: no warning)
         csv_path.write_text("# units: deg\ntime,a,b\n0,0.1,0.2\n0.01,0.2,-4\n")
         pj.read_joint_angles(csv_path)
+
+
+def test_sweep_names_where_its_unwritable_folder_comes_from(tmp_path, capsys, monkeypatch):
+    """The output folder given by the file's sweep.out is named as that key, not as --out, and the
+    resumable store inside the output folder is checked before any work, named by the option (not
+    by fitting.sweep's argument `out`)."""
+    from pathlib import Path
+
+    import fitting._sweep
+
+    monkeypatch.setattr(fitting._sweep, "sweep", lambda *a, **k: pytest.fail("the sweep ran"))
+    (tmp_path / "taken").write_text("x")
+    config = tmp_path / "sweep.toml"
+    config.write_text(Path(example("sweep_figure3.toml")).read_text().replace(
+        'out = "out_sweep"', f'out = "{(tmp_path / "taken").as_posix()}"'))
+    assert 'out = "out_sweep"' in Path(example("sweep_figure3.toml")).read_text()
+    assert cli.main(["sweep", str(config)]) == 2
+    assert f"pmpjax sweep: error: `sweep.out`: {tmp_path / 'taken'} is a file, not a folder" in capsys.readouterr().err
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "store").write_text("x")
+    assert cli.main(["sweep", str(config), "--out", str(tmp_path / "o")]) == 2
+    assert f"pmpjax sweep: error: `--out`: {tmp_path / 'o' / 'store'} is a file" in capsys.readouterr().err

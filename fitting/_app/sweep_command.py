@@ -309,8 +309,9 @@ def run_sweep_config(path, out=None, *, progress: bool = False) -> dict:
     from .._sweep import sweep
 
     row_fn, params, axes, opt = build_sweep(path)
-    out = Path(out or opt["out"] or "out_sweep")
-    out = output_dir("--out", out)
+    name = "sweep.out" if out is None and opt["out"] else "--out"  # (how errors name the folder's source)
+    out = output_dir(name, Path(out or opt["out"] or "out_sweep"))
+    output_dir(name, out / "store")  # (the resumable store too, before any work)
     res = sweep(row_fn, params, chunk_size=opt["chunk_size"], out=out / "store", progress=progress)
     names, metrics = opt["names"], opt["metrics"]
     N = len(res.status)
