@@ -487,3 +487,27 @@ def test_sweep_names_where_its_unwritable_folder_comes_from(tmp_path, capsys, mo
     (tmp_path / "o" / "store").write_text("x")
     assert cli.main(["sweep", str(config), "--out", str(tmp_path / "o")]) == 2
     assert f"pmpjax sweep: error: `--out`: {tmp_path / 'o' / 'store'} is a file" in capsys.readouterr().err
+
+
+def test_an_interrupted_command_ends_at_once_while_its_work_still_runs(tmp_path):
+    """Ctrl-C while work of the command still runs in other threads (XLA's: the interpreter's exit
+    then crashed with a segmentation fault, exit status 139, after the message): the command ends
+    its process with status 130 and one line, without waiting for them. Here the work is a thread
+    that would keep the interpreter's exit waiting for a minute."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(f"""
+        import sys, threading, time
+        import fitting._donders
+        def fit(*a, **k):
+            threading.Thread(target=time.sleep, args=(60,)).start()
+            raise KeyboardInterrupt
+        fitting._donders.fit_donders = fit
+        from pmpjax._app import cli
+        sys.argv = ["pmpjax", "fit-donders", {example("donders_example.csv")!r}, "--out", {str(tmp_path)!r}]
+        sys.exit(cli.main())
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=50)
+    assert proc.returncode == 130 and proc.stderr.splitlines() == ["pmpjax fit-donders: interrupted"], proc.stderr

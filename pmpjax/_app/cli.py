@@ -156,6 +156,7 @@ def _print_warning(command: str):
 
 def main(argv=None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
+    whole_process = argv is None  # (the `pmpjax` command, not a call from Python)
     argv = list(sys.argv[1:] if argv is None else argv)
     command, args = "reproduce", None
     try:
@@ -187,7 +188,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         resume = getattr(args, "resume", None)
         print(f"pmpjax {command}: interrupted" + (f"; {resume(args)}" if resume else ""), file=sys.stderr)
-        if pools_interrupted():  # (the interpreter's exit could wait forever on the ended workers' pools)
+        # The interpreter's exit could wait forever on the ended workers' pools, or crash while the
+        # interrupted work's threads (XLA's) still run (a segmentation fault, exit status 139):
+        # the command ends its process at once.
+        if pools_interrupted() or whole_process:
             with contextlib.suppress(OSError, ValueError):
                 sys.stdout.flush()
                 sys.stderr.flush()
