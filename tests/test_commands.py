@@ -2,6 +2,7 @@
 
 import csv
 import json
+import re
 import types
 import warnings
 from importlib import resources
@@ -511,3 +512,34 @@ def test_an_interrupted_command_ends_at_once_while_its_work_still_runs(tmp_path)
     """)
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=50)
     assert proc.returncode == 130 and proc.stderr.splitlines() == ["pmpjax fit-donders: interrupted"], proc.stderr
+
+
+def test_fit_movements_reading_limits_are_options_and_named_as_such(tmp_path, capsys, monkeypatch):
+    """Recordings with jittered sample times or a long gap are refused naming the option that
+    admits them (the reader's `sample_tol`, `max_gap` are no options of the command), and with it
+    they are read."""
+    from pathlib import Path
+
+    from fitting import _movements
+
+    def fit(chain, recordings, **k):
+        raise ValueError(f"read {len(recordings)} recording(s), gaps filled: {recordings[0].filled_gaps}")
+
+    monkeypatch.setattr(_movements, "fit_movements", fit)
+    lines = Path(example("reaching/S1_trial1.mot")).read_text().splitlines()
+    head = lines.index("endheader") + 2
+    jitter = [f"{float(r.split(chr(9))[0]) + (0.003 if k == 5 else 0):.3f}\t" + r.split("\t", 1)[1]
+              for k, r in enumerate(lines[head:])]
+    gap = [r.split("\t", 2)[0] + "\t" + r.split("\t", 2)[1] + "\tNaN\t" + r.split("\t", 3)[3] if 300 <= k < 310
+           else r for k, r in enumerate(lines[head:])]
+    for name, rows, option, value, expect in [
+            ("S1_jitter.mot", jitter, "--sample-tol", "0.5", r"by more than --sample-tol 0\.01 \(relative\)"),
+            ("S1_gap.mot", gap, "--max-gap", "0.2", r"valid samples, 0\.11 s, is longer than --max-gap 0\.05 s$")]:
+        path = tmp_path / name
+        path.write_text("\n".join(lines[:head] + rows) + "\n")
+        argv = ["fit-movements", "--chain", example("arm5.xml"), "--site", "hand", str(path), "--out", str(tmp_path)]
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"pmpjax fit-movements: error: {path}: ") and re.search(expect, err), err
+        assert cli.main([*argv, option, value]) == 2
+        assert "error: read 1 recording(s)" in capsys.readouterr().err

@@ -59,6 +59,11 @@ def add_fit_movements(sub) -> None:
                    help="the rest angles stay within each joint's recorded range widened by DEG degrees "
                    "(default 90)")
     p.add_argument("--out", default="out_movements", help="output folder (default out_movements)")
+    p.add_argument("--max-gap", type=float, default=0.05, metavar="S",
+                   help="longest run of missing samples (NaN) [s] filled by linear interpolation (default 0.05)")
+    p.add_argument("--sample-tol", type=float, default=0.01, metavar="R",
+                   help="largest relative deviation of a sample interval from the recording's median interval "
+                   "(default 0.01)")
     p.add_argument("--no-figures", action="store_true", help="no figures")
     p.set_defaults(func=_fit_movements)
 
@@ -70,10 +75,21 @@ def _subject(path: Path, pattern: re.Pattern) -> str:
     return m.group(1) if m.groups() else m.group(0)
 
 
-def read_recordings_for(chain, paths, pattern: re.Pattern) -> list:
+#: read_joint_angles' arguments as the command's options (its messages name them so).
+_READER_OPTIONS = {"max_gap": "--max-gap", "sample_tol": "--sample-tol"}
+
+
+def read_recordings_for(chain, paths, pattern: re.Pattern, max_gap: float = 0.05, sample_tol: float = 0.01) -> list:
     import pmpjax as pj
 
-    return [pj.read_joint_angles(p, subject=_subject(Path(p), pattern), joints=chain) for p in paths]
+    try:
+        return [pj.read_joint_angles(p, subject=_subject(Path(p), pattern), joints=chain, max_gap=max_gap,
+                                     sample_tol=sample_tol) for p in paths]
+    except ValueError as e:
+        text = str(e)
+        for arg, option in _READER_OPTIONS.items():
+            text = text.replace(f"{arg} = ", f"{option} ").replace(f"`{arg}`", option)
+        raise ValueError(text) from None
 
 
 def _fit_movements(args) -> int:
@@ -113,8 +129,8 @@ def _fit_movements(args) -> int:
         if _subject(Path(p), pattern) not in fitted:
             raise ValueError(f"--holdout {p}: its subject {_subject(Path(p), pattern)!r} has no recording to fit "
                              f"(subjects fitted: {', '.join(sorted(fitted))}; --subject-pattern names them)")
-    train = read_recordings_for(chain, args.recordings, pattern)
-    held = read_recordings_for(chain, args.holdout, pattern)
+    train = read_recordings_for(chain, args.recordings, pattern, args.max_gap, args.sample_tol)
+    held = read_recordings_for(chain, args.holdout, pattern, args.max_gap, args.sample_tol)
     fit = fit_movements(chain, train, model=args.model, damping=args.damping, time_constants=args.time_constants,
                         segmented=args.segmented, rest_margin_deg=args.rest_margin)
     write_csv(out / "movement_fit.csv", fit.summary())
