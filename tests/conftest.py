@@ -29,6 +29,12 @@ def pytest_configure(config):
     subprocess compile is compiled once. Fresh every run (every run measures cold compilation, as
     CI does) and removed at the end; ``PMPJAX_TEST_CACHE_DIR=dir`` keeps one across runs instead,
     ``JAX_ENABLE_COMPILATION_CACHE=false`` turns it off."""
+    # One BLAS thread per process (the xdist workers and the tests' subprocesses inherit it; this
+    # process loaded OpenBLAS before reading it). Two workers on two cores, each with OpenBLAS's
+    # default thread per core, oversubscribe the cores whenever both compute, and OpenBLAS's
+    # threads spin while they wait: NumPy's 200 × 200 solve + eigh took 13 ms single-threaded and
+    # 615 ms with two threads on a busy machine (the pointing analysis's smoothing-spline GCV).
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     path = os.environ.get(CACHE_ENV)
     if not path:  # the controller (or a run without xdist): workers inherit the environment
         path = tempfile.mkdtemp(prefix="pmpjax-test-jax-cache-")
