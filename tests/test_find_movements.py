@@ -225,6 +225,21 @@ def test_a_twitch_below_min_peak_speed_is_skipped_with_its_reason():
     assert short.skipped[0][0] <= flick["t_onset"] + 0.03 and short.skipped[0][1] >= flick["t_onset_off"] - 0.03
 
 
+def test_the_default_min_duration_keeps_a_reach_of_0_2_s_and_skips_shorter_ones():
+    # Documented: a 0.2 s minimum-jerk reach lasts 0.15 s between its 20 % crossings, the default
+    # min_duration. Noise-free reaches of 0.18, 0.23 and 0.26 s, filtered at 20 Hz (their crossings
+    # within a sample of the closed form): the first (0.133 s on this arm) is skipped, the others kept.
+    moves = ((0.8, 0.18), (1.6, 0.23), (2.4, 0.26))
+    true, _, _ = truth(moves, POSTURES, [(0.7, 1.5), (1.5, 2.3), (2.3, 3.2)])
+    width = np.array([r["t_onset_off"] - r["t_onset"] for r in true])
+    assert width[0] < 0.14 and np.all(width[1:] > 0.16), width
+    t = np.arange(0.0, 3.6, 1 / FS)
+    found = pj.find_movements(recording(t, moves, noise=0.0), ARM, smoothing_hz=20.0)
+    assert len(found) == 2 and np.all(np.abs(found.t_peak - [true[1]["t_peak"], true[2]["t_peak"]]) <= 0.02)
+    assert len(found.skipped) == 1 and "shorter than min_duration=0.15 s" in found.skipped[0][2]
+    assert found.skipped[0][0] < true[0]["t_peak"] < found.skipped[0][1]
+
+
 def test_reaches_running_off_either_end_of_the_recording_are_skipped():
     t = np.arange(1.3, 5.0, 1 / FS)  # starts inside reach 1 (1.0..1.8 s), ends inside reach 3 (4.5..5.5 s)
     found = pj.find_movements(recording(t, THREE), ARM)

@@ -735,6 +735,12 @@ def test_bootstrap_batch_equals_singles_and_bad_input():
         for f in ("w", "lo", "hi"):
             np.testing.assert_allclose(getattr(one, f), getattr(res, f)[i], atol=1e-10, rtol=0)
         np.testing.assert_allclose(one.samples, res.samples[:, i], atol=1e-10, rtol=0)
+    # The intervals are the (1 ± level)/2 percentiles of the replicates (the default level 0.95).
+    for level, r in ((0.95, res), (0.8, fitting.bootstrap_ik_weights(q, x, J, mask=mask, seed=keys, level=0.8, **kw))):
+        np.testing.assert_array_equal(np.asarray(r.samples), np.asarray(res.samples))
+        lo, hi = np.percentile(np.asarray(res.samples), [50 * (1 - level), 50 * (1 + level)], axis=0)
+        np.testing.assert_allclose(np.asarray(r.lo), lo, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(r.hi), hi, rtol=0, atol=1e-12)
     shared = fitting.bootstrap_ik_weights(q, x, J, mask=mask, seed=keys[0], **kw)
     assert not np.allclose(shared.samples[:, 0], shared.samples[:, 2])  # items draw differently
     bad = fitting.bootstrap_ik_weights(q, x, J, mask=np.zeros_like(mask), seed=keys, **kw)

@@ -71,6 +71,31 @@ def test_in_degrees_no_keeps_radians(tmp_path):
     assert rec.fs == pytest.approx(50.0, rel=1e-12)
 
 
+def test_in_degrees_true_and_false_read_as_yes_and_no(tmp_path):
+    # OpenSim writes booleans either way: 'false' means radians (values kept), 'true' degrees.
+    body = "endheader\ntime\tshoulder\telbow\n0.0\t0.1\t1.5\n0.02\t-0.25\t1.625\n0.04\t-0.5\t3.0\n"
+    rad = pj.read_joint_angles(write(tmp_path, "f.mot", "arm\ninDegrees=false\n" + body))
+    np.testing.assert_array_equal(rad.q, [[0.1, 1.5], [-0.25, 1.625], [-0.5, 3.0]])
+    deg = pj.read_joint_angles(write(tmp_path, "t.sto", "arm\ninDegrees=TRUE\n" + body))
+    np.testing.assert_allclose(deg.q, np.pi / 180 * np.array([[0.1, 1.5], [-0.25, 1.625], [-0.5, 3.0]]),
+                               rtol=1e-15, atol=0)
+
+
+def test_four_missing_samples_at_100_hz_are_filled_by_default(tmp_path):
+    # The documented default max_gap (0.05 s) bridges 4 missing samples at 100 Hz, not 5, wherever
+    # the gap falls on the clock (decimal times are not exact in binary).
+    for first in range(1, 30):
+        times = [f"{k / 100:.2f}" for k in range(first + 6)]
+        value = lambda k, gap: "nan" if first <= k < first + gap else f"{k / 10:.1f}"  # noqa: E731
+        rows = [f"{s},{value(k, 4)},1" for k, s in enumerate(times)]
+        rec = pj.read_joint_angles(write(tmp_path, "four.csv", csv_text(rows)))
+        np.testing.assert_allclose(rec.q[:, 0], np.arange(first + 6) / 10, rtol=0, atol=1e-12)
+        assert rec.filled_gaps == (("a", float(times[first]), float(times[first + 3])),)
+        five = [f"{s},{value(k, 5)},1" for k, s in enumerate(times)]
+        with pytest.raises(ValueError, match="longer than max_gap = 0.05 s"):
+            pj.read_joint_angles(write(tmp_path, "five.csv", csv_text(five)))
+
+
 def test_without_in_degrees_degrees_are_assumed_and_radian_like_values_warn(tmp_path):
     text = MOT.replace("inDegrees=yes\n", "")
     with warnings.catch_warnings():

@@ -74,6 +74,22 @@ def test_gain_is_the_exact_ratio_up_to_the_cap(T):
     np.testing.assert_allclose([minjerk_gain(ti, T, cap) for ti in t], np.minimum(ref, cap), rtol=1e-12)
 
 
+def test_the_default_cap_is_200_per_second():
+    # The signature's default gain_cap = 200 /s: the exact ratio up to where it reaches 200 (found
+    # here by bisection on the Fractions), 200 from there on and after the end.
+    T = 0.5
+    lo, hi = Fraction(1, 2), Fraction(1)
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if gamma_exact(mid * T, Fraction(T)) < 200 else (lo, mid)
+    s_cap = float(lo)
+    assert abs((1 - s_cap) - 3 / (T * 200)) < 0.1 * 3 / (T * 200)  # documented: 1 − s ≈ 3/(T·cap)
+    s = np.array([0.3, s_cap - 1e-4, s_cap + 1e-4, 0.999, 1.0, 1.5])
+    g = np.asarray(pj.MinimumJerkPlanner(duration=T).gain(jnp.asarray(s * T)))
+    np.testing.assert_allclose(g[:2], [gamma_at(v * T, T) for v in s[:2]], rtol=1e-12)
+    assert g[1] < 200.0 and np.all(g[2:] == 200.0), g
+
+
 def test_gain_is_elementwise_over_batches():
     T = np.array([0.3, 0.4, 1.0, 2.0])
     cap = np.array([15.0, 200.0, 1e300, 50.0])

@@ -95,3 +95,79 @@ def test_bad_input():
     r = fitting.least_squares(_rosenbrock, np.zeros(3), (1.0, 1.0))
     with pytest.raises(ValueError, match="rcond"):
         fitting.covariance(r, rcond=-1.0)
+
+
+def test_group_jackknife_is_least_squares_without_each_group():
+    # A linear model (the Gauss–Newton step from the optimum is then exact): 2 shared slopes, one
+    # offset per group (its nuisance column), 7 groups of 5 rows, and 2 prior rows in no group.
+    # Reference: the slopes refitted by lstsq without each group's rows and offset, then the
+    # textbook delete-one jackknife (n − 1)/n Σ (β_(g) − β̄)(β_(g) − β̄)ᵀ.
+    from fitting._optimise import group_jackknife_covariance
+
+    rng = np.random.default_rng(11)
+    n, k = 7, 5
+    groups = np.concatenate([np.repeat(np.arange(n), k), [-1, -1]])
+    X = rng.normal(size=(n * k, 2))
+    offsets = np.zeros((n * k + 2, n))
+    offsets[np.arange(n * k), groups[:-2]] = 1.0
+    J = np.concatenate([np.concatenate([X, 0.1 * np.eye(2)]), offsets], axis=1)
+    y = J @ np.concatenate([[0.7, -1.3], rng.normal(size=n)]) + rng.normal(scale=0.3, size=n * k + 2)
+    y[: n * k] += np.repeat(rng.normal(scale=0.5, size=n), k) * X[:, 0]  # slopes that vary by group
+    beta = np.linalg.lstsq(J, y, rcond=None)[0]
+    r = J @ beta - y
+    drop = []
+    for g in range(n):
+        rows = groups != g
+        cols = np.r_[0, 1, 2 + np.flatnonzero(np.arange(n) != g)]
+        drop.append(np.linalg.lstsq(J[np.ix_(rows, cols)], y[rows], rcond=None)[0][:2])
+    D = np.array(drop) - np.mean(drop, axis=0)
+    ref = (n - 1) / n * D.T @ D
+    cov = group_jackknife_covariance(J, r, groups, 2, nuisance_groups=np.arange(n))
+    np.testing.assert_allclose(cov, ref, rtol=1e-9, atol=1e-15)
+    # Without nuisance columns (shared parameters only); fewer than two groups: NaN.
+    Js, rs = J[:, :2].copy(), (J[:, :2] @ np.linalg.lstsq(J[:, :2], y, rcond=None)[0] - y)
+    drop = [np.linalg.lstsq(Js[groups != g], y[groups != g], rcond=None)[0] for g in range(n)]
+    D = np.array(drop) - np.mean(drop, axis=0)
+    np.testing.assert_allclose(group_jackknife_covariance(Js, rs, groups, 2), (n - 1) / n * D.T @ D, rtol=1e-9)
+    assert np.all(np.isnan(group_jackknife_covariance(Js, rs, np.where(groups > 0, -1, groups), 2)))
+
+
+def test_the_stopping_rules_stop_at_the_first_iterate_that_meets_one():
+    # A linear least-squares problem (every Levenberg–Marquardt step is accepted) with the cost, step
+    # and statistical tolerances on, as 48 items that differ in where each rule binds: a constant
+    # residual entry e (cost + e²/2: the cost and statistical rules looser) and a shift s of the
+    # solution (|x| from 1e-3 to 1e4: the step rule looser or tighter). The iterates x_k come from runs
+    # capped at k steps (a traced step limit). In NumPy: some rule holds between the last two iterates and none between
+    # the two before (ftol: |Δcost| ≤ ftol·cost; xtol: |Δx| ≤ xtol (|x| + xtol); stol: the Gauss–Newton
+    # gain, here the cost above the lstsq optimum, ≤ stol·σ² with σ² = 2 cost/(N − p)).
+    rng = np.random.default_rng(5)
+    N, p, B = 41, 3, 48
+    A = rng.normal(size=(N - 1, p)) * [1.0, 10.0, 0.1]
+    b = A @ np.array([1.0, -2.0, 3.0]) + rng.normal(scale=0.1, size=N - 1)
+    x_opt = np.linalg.lstsq(A, b, rcond=None)[0]
+    e = 0.1 * 10.0 ** rng.uniform(0, 4, B)
+    shift = rng.normal(size=(B, p)) * 10.0 ** rng.uniform(-3, 4, (B, 1)) - x_opt  # the solutions x_opt + shift
+    x_opt = x_opt + shift
+    starts = x_opt + rng.normal(size=(B, p)) * 10.0 ** rng.uniform(1, 3, (B, 1)) / np.abs(A).max(0)
+    cost = lambda x: 0.5 * (np.sum(((x - shift) @ A.T - b) ** 2, axis=-1) + e**2)  # noqa: E731
+    ftol, xtol, stol = 1e-3, 1e-5, 1e-4
+
+    def resid(x, args):
+        s, extra = args
+        return jnp.concatenate([jnp.asarray(A) @ (x - s) - jnp.asarray(b), extra[None]])
+
+    run = jax.jit(jax.vmap(lambda x0, m, s, extra: fitting.least_squares(
+        resid, x0, (s, extra), max_steps=m, gtol=0.0, ftol=ftol, xtol=xtol, stol=stol, damping=10.0)))
+    data = (jnp.asarray(shift), jnp.asarray(e))
+    res = run(jnp.asarray(starts), jnp.full(B, 200), *data)
+    k = np.asarray(res.steps)
+    assert np.all(np.asarray(res.converged)) and np.all(k >= 2), k
+    x = [np.asarray(res.x)] + [np.asarray(run(jnp.asarray(starts), jnp.asarray(k - j), *data).x) for j in (1, 2)]
+
+    def rules(new, old):
+        return np.stack([np.abs(cost(old) - cost(new)) <= ftol * cost(old),
+                         np.linalg.norm(new - old, axis=1) <= xtol * (np.linalg.norm(old, axis=1) + xtol),
+                         cost(new) - cost(x_opt) <= stol * 2 * cost(new) / (N - p)])
+
+    last, before = rules(x[0], x[1]), rules(x[1], x[2])
+    assert np.all(last.any(0)) and not np.any(before), (k, last, before)

@@ -195,3 +195,31 @@ def test_pivoted_lu_matches_lapack(rng):
         ref = np.stack([np.linalg.solve(A[..., k], b[:, k]) for k in range(9)], -1)
         np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-12)
 
+
+
+def test_rodas4_tableau_satisfies_the_rosenbrock_order_conditions():
+    # The coefficients in rodas.f's form (a, c, m, d, alpha) converted back to Hairer & Wanner's
+    # (alpha_ij, gamma_ij) (IV.7.25: C = diag(1/γ) − Γ⁻¹, A = αΓ⁻¹, m = bΓ⁻¹) and checked against the
+    # eight order-4 conditions of Table IV.7.1, the embedded solution (the last stage's argument,
+    # stiffly accurate) against the four of order 3, and alpha_i, d_i = gamma_i against the row sums.
+    from pmpjax._pmp.integrate import RODAS4 as tab
+
+    s, g = len(tab.alpha), tab.gamma
+    A, C = np.zeros((s, s)), np.zeros((s, s))
+    for i in range(s):
+        A[i, : len(tab.a[i])], C[i, : len(tab.c[i])] = tab.a[i], tab.c[i]
+    G = np.linalg.inv(np.eye(s) / g - C)
+    al, b, bh = A @ G, np.asarray(tab.m) @ G, A[-1] @ G
+    np.testing.assert_allclose(np.diag(G), g, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(al.sum(1), tab.alpha, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(G.sum(1), tab.d, rtol=0, atol=1e-13)
+    beta = al + G - np.diag(np.diag(G))
+    bp, a1 = beta.sum(1), al.sum(1)
+    order4 = [b.sum(), b @ bp, b @ a1**2, b @ beta @ bp, b @ a1**3, b @ (a1 * (al @ bp)), b @ beta @ a1**2,
+              b @ beta @ beta @ bp]
+    rhs = [1, 0.5 - g, 1 / 3, 1 / 6 - g + g * g, 1 / 4, 1 / 8 - g / 3, 1 / 12 - g / 3,
+           1 / 24 - g / 2 + 1.5 * g * g - g**3]
+    np.testing.assert_allclose(order4, rhs, rtol=0, atol=1e-13)
+    np.testing.assert_allclose([bh.sum(), bh @ bp, bh @ a1**2, bh @ beta @ bp], rhs[:4], rtol=0, atol=1e-13)
+    # L-stable: R(∞) = 1 − bᵀ(α + Γ)⁻¹ 1 = 0 (stability function R(z) = 1 + z bᵀ(I − z(α + Γ))⁻¹ 1).
+    assert abs(1.0 - b @ np.linalg.solve(al + G, np.ones(s))) < 1e-13
