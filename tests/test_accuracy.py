@@ -147,9 +147,14 @@ def test_adaptive_steps_match_radau_on_sequences_and_count_their_steps():
         assert int(tr.status) == 0
         np.testing.assert_allclose(np.asarray(tr.q), np.stack([out, back]), atol=LIMIT, rtol=0)
         np.testing.assert_allclose(np.asarray(tr.t), ts)
-    few = pj.simulate(model(), planner, Q_REST, x_d, duration=T, dt=None, saveat=pj.SaveAt(ts=tuple(ts)),
-                      max_steps=5)
+    # (the RK4 sequence above with 5 steps allowed: the allowance is a traced bound, no new compile)
+    from pmpjax.internal import simulate_module
+
+    compiled = simulate_module._run_adaptive._cache_size()
+    few = pj.simulate_sequence(model(), planner, Q_REST, np.stack([x_d, np.zeros(2)]), duration=T, dt=None,
+                               saveat=pj.SaveAt(ts=tuple(ts)), max_steps=5)
     assert int(few.status) == int(pj.Status.MAX_STEPS)
+    assert simulate_module._run_adaptive._cache_size() == compiled
 
 
 def test_adaptive_forward_derivatives_match_central_differences_of_radau():

@@ -379,9 +379,10 @@ def _simulate_adaptive(model, planner, q0, targets, duration, saveat, singular_t
                          "simulate fewer movements at a time")
     if is_concrete(model, planner, q0):
         check_rk4_stability(model, planner, q0, batch, None)
+    # (the step allowance is a traced loop bound: runs that differ only in it share one compile)
     out = _run_adaptive(model, planner, q0, targets, batch=batch, ts=ts, include_initial=ts[0] == 0.0,
                         singular_tol=float(singular_tol), single=single, solver=solver, rtol=rtol, atol=atol,
-                        max_steps=max_steps)
+                        max_steps=np.int32(min(max_steps, np.iinfo(np.int32).max)))
     valid = None if concrete else _valid_items(model, planner, q0, targets, batch)
     return replace(out, t=to_jax(np.asarray(ts)),
                    status=_judge(out.status, out.error_estimate, out.q, q0, batch, rtol, atol, valid))
@@ -846,7 +847,7 @@ def _movements_adaptive(model, planner, q0, targets, *, batch, ts, include_initi
 
 
 _run_adaptive = jax.jit(_movements_adaptive, static_argnames=(
-    "batch", "ts", "include_initial", "singular_tol", "single", "solver", "rtol", "atol", "max_steps"))
+    "batch", "ts", "include_initial", "singular_tol", "single", "solver", "rtol", "atol"))
 
 
 #: The kernel, and the compile-light kernel for small batches (:func:`_primal_run`).
