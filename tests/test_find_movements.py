@@ -240,6 +240,22 @@ def test_the_default_min_duration_keeps_a_reach_of_0_2_s_and_skips_shorter_ones(
     assert found.skipped[0][0] < true[0]["t_peak"] < found.skipped[0][1]
 
 
+@pytest.mark.parametrize(("deg", "lo", "hi", "explicit"), [(4.5, 0.06, 0.09, dict(min_peak_fraction=0.0)),
+                                                         (7.0, 0.105, 0.135, {})])
+def test_the_default_peak_thresholds_are_0_1_m_per_s_and_a_fifth_of_the_largest(deg, lo, hi, explicit):
+    # A noise-free wrist flick between reaches 1 and 2 (largest peak 0.7 m/s): at 0.06-0.09 m/s it is
+    # no reach under the default min_peak_speed (0.1 m/s), at 0.105-0.135 m/s none under the default
+    # min_peak_fraction (0.2 of the largest peak: 0.14 m/s); halving either threshold makes it one.
+    postures = np.concatenate([POSTURES[:2], POSTURES[1:2] + np.deg2rad([0.0, 0.0, deg]), POSTURES[2:]])
+    moves = (THREE[0], (2.0, 0.3), *THREE[1:])
+    true, _, _ = truth(moves, postures, [(0.9, 1.9), (1.9, 2.4), (2.7, 3.5), (4.4, 5.6)])
+    assert lo < true[1]["peak"] < hi < 0.2 * max(r["peak"] for r in true)
+    rec = recording(T7, moves, postures, noise=0.0)
+    assert len(pj.find_movements(rec, ARM, **explicit)) == 3
+    half = dict(min_peak_speed=0.05) if explicit else dict(min_peak_fraction=0.1)
+    assert len(pj.find_movements(rec, ARM, **explicit, **half)) == 4
+
+
 def test_reaches_running_off_either_end_of_the_recording_are_skipped():
     t = np.arange(1.3, 5.0, 1 / FS)  # starts inside reach 1 (1.0..1.8 s), ends inside reach 3 (4.5..5.5 s)
     found = pj.find_movements(recording(t, THREE), ARM)

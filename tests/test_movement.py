@@ -19,6 +19,7 @@ def test_segmentation_finds_the_known_threshold_crossings():
     # start: the last sample before the peak that is below the level; end: the first after it.
     assert start == int(np.floor(t_lo * 120 - 1e-9)) and t[start] < t_lo <= t[start + 1]
     assert end == int(np.ceil(t_hi * 120 + 1e-9)) and t[end - 1] <= t_hi < t[end]
+    assert pj.segment_by_speed(speed) == (start, end)  # the default level is the paper's 20 %
 
 
 def test_segmentation_reports_a_cut_movement():

@@ -757,3 +757,28 @@ def test_a_trial_that_starts_on_a_peripheral_target_keeps_its_first_movement(exp
         assert np.isfinite(an.a_net[i, j, k]), [r for r in an.excluded if r[1] == trial]
         assert an.a_net[i, j, k] == pytest.approx(analysis.a_net[i, j, k], abs=0.02)
     assert not any("never shown" in r[3] for r in an.excluded)
+
+
+def test_clustered_standard_errors_follow_the_residual_layout_of_path_residual():
+    # The sandwich (JᵀJ)⁻¹ (Σ_m g_m g_mᵀ) (JᵀJ)⁻¹ · M/(M − 2), g_m = J_mᵀ r_m over movement m's entries,
+    # with the movements read off path_residual's documented layout (paths (L, n, 2), speeds (L, n),
+    # durations (L,), each flattened movement-major) and M the movements with data (weight > 0).
+    from fitting._pointing.time_constants import _clustered_se
+
+    rng = np.random.default_rng(2)
+    items, L, n = 2, 7, 4
+    R = L * (3 * n + 1)
+    jac, r = rng.normal(size=(items, R, 2)), rng.normal(size=(items, R))
+    w = np.ones((items, L))
+    w[1, [2, 5]] = 0.0
+    rows = np.arange(R)
+    owner = np.empty(R, int)
+    owner[rows[: 2 * L * n].reshape(L, n, 2)] = np.arange(L)[:, None, None]
+    owner[rows[2 * L * n: 3 * L * n].reshape(L, n)] = np.arange(L)[:, None]
+    owner[rows[3 * L * n:]] = np.arange(L)
+    for i in range(items):
+        M = int(np.sum(w[i] > 0))
+        bread = np.linalg.inv(jac[i].T @ jac[i])
+        g = np.stack([jac[i][owner == m].T @ r[i][owner == m] for m in range(L)])
+        ref = bread @ g.T @ g @ bread * M / (M - 2)
+        np.testing.assert_allclose(_clustered_se(jac, r, w, n)[i], np.sqrt(np.diag(ref)), rtol=1e-12)
