@@ -1,5 +1,6 @@
 """fitting: batched, differentiable parameter fits built on pmpjax (never imported by pmpjax)."""
 
+from . import _installed  # noqa: F401  (first: pmpjax is the installed package, not a clone's folder)
 from ._donders import DondersFit as DondersFit
 from ._donders import coefficient_names as coefficient_names
 from ._donders import donders_coefficients as donders_coefficients

@@ -543,3 +543,24 @@ def test_fit_movements_reading_limits_are_options_and_named_as_such(tmp_path, ca
         assert err.startswith(f"pmpjax fit-movements: error: {path}: ") and re.search(expect, err), err
         assert cli.main([*argv, option, value]) == 2
         assert "error: read 1 recording(s)" in capsys.readouterr().err
+
+
+def test_a_script_beside_a_clone_named_pmpjax_is_told_why_fitting_cannot_import(tmp_path):
+    """A script kept in the folder that holds a clone named pmpjax: Python imports the clone's folder
+    as an empty package, and ``import fitting`` says so (it said "cannot import name 'Status' from
+    'pmpjax' (unknown location)")."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "pmpjax" / "pmpjax").mkdir(parents=True)
+    (tmp_path / "analysis.py").write_text("import fitting\n")
+    run = {"cwd": tmp_path, "capture_output": True, "text": True, "env": {**os.environ, "PYTHONPATH": ""}}
+    probe = subprocess.run([sys.executable, "-c", "import pmpjax; print(getattr(pmpjax, '__file__', None))"], **run)
+    if probe.stdout.strip() != "None":
+        pytest.skip("this installation of pmpjax takes precedence over a folder in the current one")
+    proc = subprocess.run([sys.executable, "analysis.py"], **run)
+    assert proc.returncode == 1 and proc.stderr.strip().splitlines()[-1] == (
+        f"ImportError: Python imported the folder {tmp_path / 'pmpjax'} instead of the installed pmpjax (a script "
+        "or python -m run in the folder that holds a clone named pmpjax puts that folder first): run it from any "
+        "other folder"), proc.stderr
