@@ -224,3 +224,31 @@ def test_rodas4_tableau_satisfies_the_rosenbrock_order_conditions():
     np.testing.assert_allclose([bh.sum(), bh @ bp, bh @ a1**2, bh @ beta @ bp], rhs[:4], rtol=0, atol=1e-13)
     # L-stable: R(∞) = 1 − bᵀ(α + Γ)⁻¹ 1 = 0 (stability function R(z) = 1 + z bᵀ(I − z(α + Γ))⁻¹ 1).
     assert abs(1.0 - b @ np.linalg.solve(al + G, np.ones(s))) < 1e-13
+
+
+def test_rodas4_step_with_stages_in_a_loop_is_the_documented_stage_equation():
+    # One step of a time-dependent linear field y' = A y + sin(3t) b (∂f/∂t ≠ 0, so every stage's
+    # d_i h ∂f/∂t term counts) against NumPy: (I/(γh) − A) U_i = f(t + α_i h, y + Σ a_ij U_j)
+    # + Σ (c_ij/h) U_j + d_i h ∂f/∂t, y_next = y + Σ m_i U_i; both kernels (stages unrolled or looped).
+    from pmpjax._pmp.integrate import RODAS4 as tab
+    from pmpjax._pmp.integrate import rosenbrock_step
+
+    A = np.array([[-50.0, 1.0], [0.5, -0.3]])
+    bv = np.array([1.0, -2.0])
+    t, h, y = 0.3, 0.05, np.array([[0.4], [-0.1]])
+
+    def f(t_, y_, _):
+        return jnp.asarray(A) @ y_ + jnp.sin(3.0 * t_) * jnp.asarray(bv)[:, None]
+
+    M = np.eye(2) / (tab.gamma * h) - A
+    ft = 3.0 * np.cos(3.0 * t) * bv[:, None]
+    U = []
+    for i in range(len(tab.alpha)):
+        yi = y + sum(a * u for a, u in zip(tab.a[i], U))
+        rhs = A @ yi + np.sin(3.0 * (t + tab.alpha[i] * h)) * bv[:, None] + tab.d[i] * h * ft
+        rhs = rhs + sum(c / h * u for c, u in zip(tab.c[i], U))
+        U.append(np.linalg.solve(M, rhs))
+    ref = y + sum(m * u for m, u in zip(tab.m, U))
+    for loop in (False, True):
+        out = jax.jit(lambda y_, lp=loop: rosenbrock_step(f, t, y_, h, None, stage_loop=lp))(jnp.asarray(y))
+        np.testing.assert_allclose(np.asarray(out), ref, rtol=1e-12, atol=1e-15)
