@@ -413,8 +413,12 @@ def test_stopping_the_command_stops_its_worker_processes(tmp_path, stop):
             while not os.path.exists(os.path.join(here, "never")):
                 time.sleep(0.05)
     """))
+    # Ctrl-C as from a terminal: a test run started in the background (`&`, nohup) hands its
+    # children SIGINT ignored, and Python then raises no KeyboardInterrupt (the command waited out
+    # the 300 s limit and failed); the command restores the default handler first.
     script = textwrap.dedent(f"""
-        import sys
+        import signal, sys
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         sys.path.insert(0, {str(tmp_path)!r})
         import sleepers
         from pmpjax._app import cli, reproduce as main_job
