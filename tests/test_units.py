@@ -187,12 +187,18 @@ def test_sweep_rows_in_milliseconds_are_refused_by_key_and_row(tmp_path):
 
     path = tmp_path / "s.toml"
     path.write_text(FIGURE3 + '[sweep]\n[sweep.grid]\n"planner.tau" = [0.06, 80.0, 0.1]\n')
-    with pytest.raises(ConfigError, match=re.escape("`planner.tau (row 1 of the sweep)` = 80 s") + ".*milliseconds"):
+    with pytest.raises(ConfigError, match=re.escape("`planner.tau (row 2 of the sweep)` = 80 s") + ".*milliseconds"):
         build_sweep(path)
     path.write_text(FIGURE3 + '[sweep]\n[sweep.grid]\n"model.tau0" = [0.08, 5.0]\n')
     with pytest.warns(UserWarning) as rec:
         build_sweep(path)
-    assert [str(w.message).split(" = ")[0] for w in rec] == ["`model.tau0 (row 1 of the sweep)`"]
+    assert [str(w.message).split(" = ")[0] for w in rec] == ["`model.tau0 (row 2 of the sweep)`"]  # (1-based)
+    # Swept angles in degrees beyond the chain's range (the wrist's ±180°) are refused, as simulate
+    # refuses them outside a sweep (inside the sweep's compiled kernel it cannot).
+    path.write_text(FIGURE3 + '[sweep]\n[sweep.grid]\n"simulation.q0_deg[0]" = [5, 400]\n')
+    with pytest.raises(ConfigError, match=re.escape("simulation.q0_deg[0] = 400° in row 2 of the sweep is beyond "
+                                                    "any Wrist joint's range (±180°)")):
+        build_sweep(path)
 
 
 def test_reach_tol_key_is_checked(tmp_path):

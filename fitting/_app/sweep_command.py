@@ -231,11 +231,11 @@ def build_sweep(path):
     for name, v in (("model.tau0", t0), ("planner.k", k), ("planner.tau", tau)):
         if name in parsed and np.any(np.asarray(v) <= 0):
             row = int(np.argmax(np.asarray(v) <= 0))
-            raise ConfigError(f"{path}: {name} must be positive; row {row} of the sweep has {float(v[row])}")
+            raise ConfigError(f"{path}: {name} must be positive; row {row + 1} of the sweep has {float(v[row])}")
         if name in parsed and name != "planner.k":  # seconds: milliseconds refused, implausible values warned
             row = int(np.argmax(np.asarray(v)))
             try:
-                check_seconds(f"{name} (row {row} of the sweep)", float(v[row]))
+                check_seconds(f"{name} (row {row + 1} of the sweep)", float(v[row]))
             except ValueError as e:
                 raise ConfigError(f"{path}: {e}") from None
     if any(p[0] == "model.KJ" for p in parsed.values()):
@@ -243,8 +243,15 @@ def build_sweep(path):
         if np.any(lam <= 0):
             row = int(np.argmax(lam <= 0))
             names = [nm for nm, p in parsed.items() if p[0] == "model.KJ"]
-            raise ConfigError(f"{path}: model.KJ is not positive definite in row {row} of the sweep "
+            raise ConfigError(f"{path}: model.KJ is not positive definite in row {row + 1} of the sweep "
                               f"({', '.join(f'{nm} = {params[nm][row]:g}' for nm in names)})")
+    limit = np.rad2deg(getattr(chain, "angle_error", None) or 2 * np.pi)  # (the chain's joint range, as simulate's)
+    for name, (kind, _, _) in parsed.items():
+        v = np.asarray(params[name], float)
+        if kind in ("model.q_rest_deg", "simulation.q0_deg") and np.any(np.abs(v) > limit * (1 + 1e-12)):
+            row = int(np.argmax(np.abs(v) > limit * (1 + 1e-12)))
+            raise ConfigError(f"{path}: {name} = {v[row]:g}° in row {row + 1} of the sweep is beyond any "
+                              f"{type(chain).__name__} joint's range (±{limit:.0f}°)")
 
     dur, dt, reach_tol = opt["duration"], opt["dt"], opt["reach_tol"]
     tg = jnp.asarray(targets)
