@@ -27,6 +27,8 @@ from scipy.optimize import least_squares, minimize
 import fitting
 import pmpjax as pj
 from fitting._app.parts import REACHING_QUICK
+from fitting._movements import fit as mfit
+from fitting._movements import model as mmodel
 from fitting._reaching import fit as rfit
 from fitting._reaching import model as rmodel
 from fitting._reaching import motions as rmotions
@@ -319,14 +321,18 @@ def test_free_damping_variants_start_inside_the_paper_model(rng):
                 nested = damping == "full" or not s[3:].any()
                 np.testing.assert_allclose(p["W"], KJ if nested else np.diag(np.diag(KJ)), atol=1e-10,
                                            err_msg=f"{damping} {tc} W")
-    # stage 1 sees only KJ and q_rest: its residual (12 parameters) must not depend on the damping
-    # variant (damping="full" used to read W entries past the end of the stage-1 vector and fail)
+    # stage 1 sees only KJ and q_rest: its residual (13 parameters, the elbow's rest angle held)
+    # must not depend on the damping variant (damping="full" once read W entries past the end of
+    # the stage-1 vector and failed)
     m = rmotions._motions(2, None, (1,), (1,))
-    data = {k: jnp.asarray(v[0]) for k, v in rfit._stack_motions([m]).items()}
-    th = jnp.asarray(np.r_[np.zeros(9), m.q_obs[:2, -1, :3].mean(0)])
-    ref = rmodel._final_residual(th, data, rmodel._Config("lambda0", "tau0_KJ", "tied", 5))
+    chain = pj.ShoulderElbowArm()
+    data = {k: jnp.asarray(v[0]) for k, v in mfit._stack([rfit._as_reaches(m)], chain).items()}
+    data["log_cond_max"] = jnp.log(100.0)
+    th = jnp.asarray(np.r_[np.zeros(9), m.q_obs[:2, -1].mean(0)])
+    gcfg = lambda d, t: rmodel._generic_config(rmodel._Config("lambda0", d, t, 5))  # noqa: E731
+    ref = mmodel.final_residual(th, data, chain, gcfg("tau0_KJ", "tied"))
     assert np.all(np.isfinite(ref)) and np.abs(ref).max() > 1e-3
-    np.testing.assert_array_equal(rmodel._final_residual(th, data, rmodel._Config("lambda0", "full", "fitted", 5)), ref)
+    np.testing.assert_array_equal(mmodel.final_residual(th, data, chain, gcfg("full", "fitted")), ref)
 
 # --- real recordings: the held-out split, predictions, bad input --------------------------------
 
@@ -384,9 +390,8 @@ def clean_fit(folders):
 
 def test_held_out_repetitions_never_enter_the_fit(folders, clean_fit, monkeypatch):
     seen = []
-    stack = rfit._stack_motions
-    monkeypatch.setattr(rfit, "_stack_motions", lambda ms, **kw: (seen.extend(np.concatenate([m.rep for m in ms])),
-                                                                 stack(ms, **kw))[1])
+    as_reaches = rfit._as_reaches
+    monkeypatch.setattr(rfit, "_as_reaches", lambda m: (seen.extend(m.rep), as_reaches(m))[1])
     poisoned = fitting.fit_reaching([2], directory=folders["poisoned"], **SMALL)
     assert seen and set(seen) <= {1, 2}
     for name in ("KJ", "q_rest", "W", "params", "loss", "stderr", "ik_weights", "mean_posture", "status"):
@@ -539,8 +544,10 @@ def test_integration_error_above_a_hundredth_of_a_degree_warns(folders, clean_fi
     assert clean_fit.integration_error_deg[0] < 0.01
     run = dict(SMALL, directory=folders["clean"], steps_per_sample=clean_fit.steps_per_sample,
                solver=clean_fit.solver, max_steps=(SMALL["max_steps"][0], 1))
+    stage2 = mfit._stage2
     for err_deg, warns in ((0.0105, True), (0.0095, False)):
-        monkeypatch.setattr(rfit, "_integration_error_batch", lambda *a, e=err_deg, **kw: np.full(1, np.deg2rad(e)))
+        monkeypatch.setattr(mfit, "_stage2", lambda *a, e=err_deg, **kw: dict(
+            stage2(*a, **kw), integration_error=np.full(1, np.deg2rad(e))))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             fit = fitting.fit_reaching([2], **run)
@@ -558,9 +565,9 @@ def test_bounds_hold_and_are_reported_where_they_bind(folders, monkeypatch):
     # outside) and be reported as binding. cond(KJ) from NumPy.
     opts = dict(SMALL, tasks=(1, 2), max_steps=(40, 0), directory=folders["clean"])
     free = fitting.fit_reaching([2], stiffness_cond_max=None, **opts)
-    compiled = rfit._stage1_batch._cache_size()
+    compiled = mfit._stage1._cache_size()
     tight = fitting.fit_reaching([2], stiffness_cond_max=1.2, **opts)
-    assert rfit._stage1_batch._cache_size() == compiled  # the bound is data: no new compile
+    assert mfit._stage1._cache_size() == compiled  # the bound is data: no new compile
     cond = lambda K: np.linalg.eigvalsh(K)[-1] / np.linalg.eigvalsh(K)[0]  # noqa: E731
     assert cond(free.KJ[0]) > 10 and not free.bound_active[0, 0]
     assert 1.2 * 0.93 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
@@ -633,7 +640,8 @@ def test_fit_movements_on_the_hugmp_files_is_the_same_fit(folders):
     direction and names it). A difference in the segmentation (T), the resampling, the start
     posture or target, the time normalisation (fractions of T, not of the recording) or the
     residual's weights moves the optimum by many standard errors."""
-    opts = dict(reps=(1,), tasks=(1,), model="lambda0", damping="tau0_KJ", time_constants="fitted")
+    # (clean_fit's motions and options, fitted to convergence: its compiled fit is reused)
+    opts = dict(reps=SMALL["reps"], tasks=SMALL["tasks"], model="lambda0", damping="tau0_KJ", time_constants="fitted")
     fr = fitting.fit_reaching([2], directory=folders["clean"], **opts)
     path = folders["clean"] / "S02_trajs.mat"
     sub = pj.load_hugmp("S02", folders["clean"])

@@ -220,13 +220,32 @@ def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8, margin_deg: f
     return data
 
 
+def _held(fun, theta, cfg):
+    """``fun`` of the fitted parameters only and their start: ``theta`` with the entries
+    ``cfg.hold`` held (``fun`` itself without held parameters). Returns ``(f, z0, embed)``."""
+    if not cfg.hold:
+        return fun, theta, lambda z: z
+    free = jnp.asarray(mdl.free_index(cfg, theta.shape[0]))
+    embed = lambda z: theta.at[free].set(z)  # noqa: E731
+    return (lambda z, d: fun(embed(z), d)), theta[free], embed
+
+
 @partial(fast_compile_jit, static_argnames=("cfg",))
 def _stage1(theta0, data, chain, max_steps, *, cfg):
+    """Stage 1 for all subjects (``theta0`` (S, postural)): ``KJ``, ``q_rest`` from the final
+    postures. A reach whose equilibrium does not exist at the start would make the start
+    non-finite and stop Levenberg–Marquardt for the whole subject: it is left out (``weight`` 0)."""
+
     def one(th0, dat):
-        r = least_squares(lambda th, d: mdl.final_residual(th, d, chain, cfg), th0, dat, max_steps=max_steps,
-                          ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
-        return dict(x=r.x, converged=r.converged, status=r.status, steps=r.steps, cost=r.cost,
-                    start=mdl.stage2_start(r.x, cfg))
+        res = lambda th, d: mdl.final_residual(th, d, chain, cfg)  # noqa: E731
+        B = dat["weight"].shape[0]
+        ok = jnp.all(jnp.isfinite(res(th0, dat)[: B * cfg.n].reshape(B, cfg.n)), axis=-1)
+        dat = dict(dat, weight=jnp.where(ok, dat["weight"], 0.0))
+        f, z0, embed = _held(res, th0, cfg)
+        r = least_squares(f, z0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
+        x = embed(r.x)
+        return dict(x=x, converged=r.converged, status=r.status, steps=r.steps, cost=r.cost,
+                    residual=r.residual, jac=r.jac, weight=dat["weight"], start=mdl.stage2_start(x, cfg))
 
     return jax.lax.map(lambda a: one(*a), (theta0, data))
 
@@ -238,8 +257,8 @@ def _unidentified(J, cfg, rows: int, B: int):
     the identified ones). The per-reach delay offsets are profiled out first: each reach's rows are
     projected off its own offset column (a direction a reach's timing explains is not identified
     by it); the subject's delay (the last parameter) is kept whole, identified as the offsets'
-    common part."""
-    p, k = mdl.n_params(cfg), mdl.n_nuisance(cfg)
+    common part. Held parameters (``cfg.hold``) have no column: ``p`` counts the fitted ones."""
+    p, k = mdl.n_params(cfg) - len(cfg.hold), mdl.n_nuisance(cfg)
     Jd = J[: B * rows]
     Jd = jnp.where(jnp.isfinite(Jd), Jd, 0.0)
     G = Jd[:, :p].reshape(B, rows, p)
@@ -256,17 +275,19 @@ def _unidentified(J, cfg, rows: int, B: int):
     return s, jnp.where(keep[:, None], 0.0, Vt)
 
 
-def _reach_jackknife_covariance(jac, residual, cfg, B: int, used: int) -> np.ndarray:
-    """The delete-one-reach jackknife covariance (p, p) of a subject's parameters (module
-    docstring): the rows of the first ``used`` of ``B`` reaches (their samples and their nuisance
-    priors) grouped by reach, each reach's own nuisance columns profiled out."""
+def _reach_jackknife_covariance(jac, residual, cfg, weight) -> np.ndarray:
+    """The delete-one-reach jackknife covariance (p, p) of a subject's fitted parameters (module
+    docstring; held ones have no column): the rows of the reaches with ``weight`` (B,) > 0 (their
+    samples and their nuisance priors) grouped by reach, each reach's own nuisance columns profiled
+    out; padding and left-out reaches in no group."""
     k, n = mdl.n_nuisance(cfg), cfg.n
-    reach = np.arange(B)
+    used = np.asarray(weight) > 0
+    reach = np.where(used, np.arange(used.shape[0]), -1)
     groups = np.concatenate([np.repeat(reach, SAMPLES * n), np.full(1 + n, -1), np.repeat(reach, k)])
-    groups = np.where(groups < used, groups, -1)[: np.asarray(jac).shape[0]]
-    nuisance = np.where(np.repeat(reach, k) < used, np.repeat(reach, k), -1) if k else None
-    return group_jackknife_covariance(jac, residual, groups, mdl.n_params(cfg), nuisance_groups=nuisance,
-                                      rcond=IDENTIFIABILITY_RCOND**2)
+    groups = groups[: np.asarray(jac).shape[0]]
+    nuisance = np.repeat(reach, k) if k else None
+    return group_jackknife_covariance(jac, residual, groups, mdl.n_params(cfg) - len(cfg.hold),
+                                      nuisance_groups=nuisance, rcond=IDENTIFIABILITY_RCOND**2)
 
 
 def _rows(dat, cfg) -> int:
@@ -290,7 +311,8 @@ def _identifiability(theta, data, chain, *, cfg, steps, solver):
     Donders-fitted model: stage 2 reports them itself)."""
 
     def one(th, dat):
-        J = jax.jacfwd(lambda t: mdl.trajectory_residual(t, dat, chain, cfg, steps, solver))(th)
+        f, z, _ = _held(lambda t, d: mdl.trajectory_residual(t, d, chain, cfg, steps, solver), th, cfg)
+        J = jax.jacfwd(lambda t: f(t, dat))(z)
         return _unidentified(J, cfg, _rows(dat, cfg), dat["weight"].shape[0])
 
     return jax.lax.map(lambda a: one(*a), (theta, data))
@@ -301,11 +323,13 @@ def _stage2(theta0, data, chain, max_steps, *, cfg, steps, solver):
     def one(th0, dat):
         res = lambda th, d: mdl.trajectory_residual(th, d, chain, cfg, steps, solver)  # noqa: E731
         lin = lambda th, d: mdl.trajectory_linearise(th, d, chain, cfg, steps, solver)  # noqa: E731
-        r = least_squares(res, th0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol,
-                          linearise=lin if mdl.n_nuisance(cfg) else None)
+        f, z0, embed = _held(res, th0, cfg)  # (held parameters: no per-reach offsets, ``fit_reaching``)
+        r = least_squares(f, z0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol,
+                          linearise=lin if mdl.n_nuisance(cfg) and not cfg.hold else None)
         sv, V0 = _unidentified(r.jac, cfg, _rows(dat, cfg), dat["weight"].shape[0])
-        err = _integration_error_one(r.x, dat, chain, cfg, steps, solver)
-        return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status,
+        x = embed(r.x)
+        err = _integration_error_one(x, dat, chain, cfg, steps, solver)
+        return dict(x=x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status,
                     steps=r.steps, jac=r.jac, singular_values=sv, V0=V0, integration_error=err)
 
     return jax.lax.map(lambda a: one(*a), (theta0, data))
@@ -401,40 +425,68 @@ def fit_movements(
     return _assemble(chain, found, usable, out, cfg, joints, margin, bool(segmented))
 
 
-def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg: float = mdl.REST_MARGIN_DEG) -> dict:
+def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg: float = mdl.REST_MARGIN_DEG, *,
+         theta0=None, steps: int | None = None, solver: str | None = None, identify: bool = True,
+         name: str = "fit_movements") -> dict:
+    """Fit every subject (stage 1, then stage 2 with the step refinement of the module docstring).
+
+    ``theta0`` (S, p): skip stage 1 and start stage 2 there (``ms[1] = 0``: the residual and
+    Jacobian at ``theta0``); ``steps``/``solver``: fixed instead of RODAS4 refined from
+    ``STEPS_PER_SAMPLE``; ``identify``: the identifiability analysis of a Donders-fitted model
+    (``ms[1] = 0``); ``name`` in warnings. Returns a dict of NumPy arrays (the fitted parameters
+    are the full ``p``, held ones included; ``jac`` has the fitted ones' columns)."""
     data = _stack(subjects, chain, margin_deg=margin_deg)
+    data["log_cond_max"] = np.full(len(subjects), math.log(cfg.cond_max))
+    jcfg = mdl.compiled(cfg)  # (the bound travels in data["log_cond_max"])
     S = len(subjects)
     k = spd_size(cfg.n)
-    th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
-    s1 = jax.device_get(_stage1(th1, data, chain, np.int32(ms[0]), cfg=cfg))
-    theta0 = np.asarray(s1["start"])
-    solver, steps = "rodas4", STEPS_PER_SAMPLE
+    fixed_steps = steps is not None
+    solver, steps = solver or "rodas4", int(steps or STEPS_PER_SAMPLE)
     B = data["weight"].shape[1]
-    out = dict(stage1=s1, solver=solver, B=data["weight"].shape[1])
+    out = dict(stage1=None, solver=solver, B=B)
+    used0 = data["weight"] > 0
+    if theta0 is None:
+        th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
+        s1 = {key: np.asarray(v) for key, v in jax.device_get(
+            _stage1(th1, data, chain, np.int32(ms[0]), cfg=jcfg)).items()}
+        out["stage1"] = s1
+        data["weight"] = s1["weight"]
+        theta0 = s1["start"]
+    else:
+        theta0 = np.asarray(theta0, float)
+    out["weight"] = np.asarray(data["weight"])
+    out["dropped"] = [np.flatnonzero(used0[i, : len(s)] & ~(out["weight"][i, : len(s)] > 0))
+                      for i, s in enumerate(subjects)]
     lm2 = np.zeros(S, int)
-    if ms[1] == 0:
-        sv, V0 = jax.device_get(_identifiability(theta0, data, chain, cfg=cfg, steps=steps, solver=solver))
+    if ms[1] == 0 and out["stage1"] is not None:
+        s1 = out["stage1"]
+        if identify:
+            sv, V0 = jax.device_get(_identifiability(theta0, data, chain, cfg=jcfg, steps=steps, solver=solver))
+        else:
+            p = mdl.n_params(cfg) - len(cfg.hold)
+            sv, V0 = np.full((S, p), np.nan), np.zeros((S, p, p))
         out.update(singular_values=sv, V0=V0)
         out.update(x=theta0, cost=s1["cost"], converged=s1["converged"], status=s1["status"],
                    jac=None, residual=None, steps=steps,
                    integration_error_deg=np.full(S, np.nan), lm2=lm2)
         return out
-    x = np.concatenate([theta0, np.zeros((S, B * mdl.n_nuisance(cfg)))], axis=1)
-    run = lambda x, d, st: {k: np.array(v) for k, v in jax.device_get(  # noqa: E731
-        _stage2(x, d, chain, np.int32(ms[1]), cfg=cfg, steps=st, solver=solver)).items()}
+    x = np.concatenate([theta0, np.zeros((S, B * mdl.n_nuisance(cfg)))], axis=1) \
+        if theta0.shape[1] == mdl.n_params(cfg) and not cfg.hold else theta0
+    run = lambda x, d, st: {key: np.array(v) for key, v in jax.device_get(  # noqa: E731
+        _stage2(x, d, chain, np.int32(ms[1]), cfg=jcfg, steps=st, solver=solver)).items()}
     s2 = run(x, data, steps)
     lm2 = lm2 + s2["steps"]
     err = np.rad2deg(s2["integration_error"])
     used = np.full(S, steps)
     # Only the subjects whose integration error at the optimum is above the tolerance are fitted
     # again, from their optimum, at twice the steps.
-    redo = np.all(np.isfinite(s2["x"]), axis=-1) & (err > INTEGRATION_TOL_DEG)
+    redo = np.all(np.isfinite(s2["x"]), axis=-1) & (err > INTEGRATION_TOL_DEG) & (ms[1] > 0) & (not fixed_steps)
     while np.any(redo) and steps < MAX_STEPS_PER_SAMPLE:
         steps *= 2
         idx = np.flatnonzero(redo)
-        r = run(s2["x"][idx], {k: v[idx] for k, v in data.items()}, steps)
-        for k, v in r.items():
-            s2[k][idx] = v if k != "steps" else s2[k][idx] + v
+        r = run(s2["x"][idx], {key: v[idx] for key, v in data.items()}, steps)
+        for key, v in r.items():
+            s2[key][idx] = v if key != "steps" else s2[key][idx] + v
         lm2[idx] += r["steps"]
         err[idx] = np.rad2deg(r["integration_error"])
         used[idx] = steps
@@ -444,8 +496,8 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], jac=s2["jac"],
                residual=s2["residual"], steps=int(used.max()), integration_error_deg=err, lm2=lm2)
     bad = err > INTEGRATION_TOL_DEG
-    if np.any(bad):
-        warnings.warn(f"fit_movements: the integration error at the optimum stays above {INTEGRATION_TOL_DEG}° "
+    if np.any(bad) and ms[1] > 0:
+        warnings.warn(f"{name}: the integration error at the optimum stays above {INTEGRATION_TOL_DEG}° "
                       f"({', '.join(f'{e:.3g}°' for e in err[bad])}) at {steps} steps per sample", stacklevel=3)
     return out
 
@@ -478,7 +530,7 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
     lm = np.zeros((S_all, 2), int)
     sv, unident, V0 = nan(S_all, p), [()] * S_all, np.zeros((S_all, p, p))
     bound = np.zeros((S_all, 1 + n), bool)
-    reach_delay, target_shift = {}, {}
+    reach_delay, target_shift, dropped = {}, {}, {}
     for a, s in enumerate(names_all):
         if s not in idx:
             continue
@@ -488,7 +540,7 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         params[a] = x
         if out["jac"] is not None:
             cov[a] = _reach_jackknife_covariance(np.asarray(out["jac"][i]), np.asarray(out["residual"][i]), cfg,
-                                                 out["B"], len(usable[s]))
+                                                 out["weight"][i])
         k_nu = mdl.n_nuisance(cfg)
         nuis = x_all[p:].reshape(-1, k_nu)[: len(usable[s])] if x_all.size > p else np.zeros((len(usable[s]), 0))
         offsets = nuis[:, 0] if mdl.reach_delays(cfg) and nuis.shape[1] else np.zeros(0)
@@ -506,7 +558,11 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         status[a] = int(out["status"][i])
         if status[a] == int(Status.SUCCESSFUL) and out["integration_error_deg"][i] > INTEGRATION_TOL_DEG:
             status[a] = int(Status.INACCURATE)  # (converged on a simulation that is not accurate enough)
-        n_reach[a] = len(usable[s])
+        n_reach[a] = max(int(np.sum(out["weight"][i][: len(usable[s])] > 0)), 1)  # (left-out reaches: zero rows)
+        for j in out["dropped"][i]:
+            dropped.setdefault(s, []).append((usable[s].recording[j], float(usable[s].t[j, 0]),
+                                              float(usable[s].t[j, -1]), "no equilibrium of the starting model "
+                                              "(KJ = I, q_rest = mean final posture): left out of the fit"))
         per = (SAMPLES - 1 + 1) * n
         N = n_reach[a] * per
         n_res[a] = N
@@ -514,14 +570,14 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         loss[a] = cost
         if out["residual"] is not None:
             r = np.asarray(out["residual"][i])[: out["B"] * per].reshape(out["B"], per)
-            r = r[: n_reach[a], : (SAMPLES - 1) * n]
+            r = r[: len(usable[s]), : (SAMPLES - 1) * n]
             rmse[a] = np.rad2deg(np.sqrt(np.sum(r**2) / (n * n_reach[a])))
         sigma2 = 2 * cost / max(N, 1)
         n_free = p + nuis.size  # the reaches' nuisance parameters count as parameters
         aic[a] = N * math.log(max(sigma2, 1e-300)) + 2 * n_free
         bic[a] = N * math.log(max(sigma2, 1e-300)) + n_free * math.log(max(N, 1))
         err[a] = out["integration_error_deg"][i]
-        lm[a] = (int(out["stage1"]["steps"][i]), int(out["lm2"][i]))
+        lm[a] = (int(out["stage1"]["steps"][i]) if out["stage1"] is not None else 0, int(out["lm2"][i]))
         sv[a] = out["singular_values"][i]
         unident[a] = _unidentified_names(out["V0"][i], pnames, cfg)
         V0[a] = out["V0"][i]
@@ -541,7 +597,8 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         singular_values=sv, loss=loss, rmse_deg=rmse, aic=aic,
         bic=bic, n_reaches=n_reach, n_residuals=n_res, lm_steps=lm, solver=out["solver"],
         steps_per_sample=int(out["steps"]), integration_error_deg=err, bound_active=bound,
-        reaches={s: found[s] for s in names_all}, skipped={s: list(found[s].skipped) for s in names_all},
+        reaches={s: found[s] for s in names_all},
+        skipped={s: list(found[s].skipped) + dropped.get(s, []) for s in names_all},
         chain=chain, joint_names=joints, model=cfg.model, damping=cfg.damping, time_constants=cfg.time_constants,
         segmented=segmented, rest_margin_deg=margin_deg)
 

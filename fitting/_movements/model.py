@@ -78,10 +78,25 @@ class Config:
     time_constants: str
     m: int = 0  # task coordinates of the per-reach target offsets (0: the targets as recorded)
     delay: bool = True  # Arimoto: fit the target-onset delay and its per-reach offsets (continuous recordings)
+    # Parameters held at their start values (indices into the subject's p; without per-reach
+    # offsets): a gauge fixed by hand, as fit_reaching's elbow rest angle.
+    hold: tuple[int, ...] = ()
+    # Bound on cond(KJ), read on the host: the compiled fits take ``log cond_max`` from their data
+    # and are called with this field at its default (``compiled``), so every bound shares a compile.
     cond_max: float = STIFFNESS_COND_MAX
     ftol: float = 1e-8
     xtol: float = 1e-8
     stol: float = 1e-4
+
+
+def compiled(cfg: Config) -> Config:
+    """``cfg`` as the compiled fits see it (a static argument): ``cond_max`` at its default."""
+    return dataclasses.replace(cfg, cond_max=STIFFNESS_COND_MAX)
+
+
+def free_index(cfg: Config, p: int):
+    """Indices (p − len(hold),) of the fitted parameters among ``p``."""
+    return tuple(i for i in range(p) if i not in cfg.hold)
 
 
 def n_postural(cfg: Config) -> int:
@@ -177,7 +192,7 @@ def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None, t_rat
         planner = pj.ArimotoPlanner(k=None, tau=p["a"] * scale, tau0=tau0, delay=delay * scale)
     else:
         d = p["a"] * (scale if cfg.time_constants == "seconds" else jnp.ones_like(duration))
-        planner = pj.MinimumJerkPlanner(duration=jnp.minimum(d, 1.0), gain_cap=GAIN_CAP)
+        planner = pj.MinimumJerkPlanner(duration=d, gain_cap=GAIN_CAP)  # (longer than the window: unfinished)
     return model, planner
 
 
@@ -188,12 +203,17 @@ def simulate(chain, model, planner, q0, target, steps: int, solver: str):
 
 
 def bound_residual(theta, data, cfg: Config):
-    """Bounds as residuals (1 + n,): ``log cond(KJ)`` above ``log cond_max`` and the rest angles
-    outside the recorded range ± ``REST_MARGIN_DEG``, through softplus hinges."""
+    """Bounds as residuals (1 + n,): ``log cond(KJ)`` above ``data["log_cond_max"]`` (traced: every
+    bound shares one compile; inf: none) and the rest angles outside ``[data["lo"], data["hi"]]``
+    (the recorded range widened by the fit's margin), through softplus hinges."""
     hinge = lambda g, width: width * jax.nn.softplus(g / width)  # noqa: E731
     k = spd_size(cfg.n)
     w = jnp.linalg.eigvalsh(log_stiffness(theta[:k], cfg.n))
-    over_c = hinge(w[-1] - w[0] - math.log(cfg.cond_max), BOUND_WIDTH[0])
+    log_max = jnp.asarray(data["log_cond_max"], w.dtype)
+    # (no bound: exactly 0 with a zero derivative; softplus(-inf) would give NaN derivatives)
+    over_c = jnp.where(jnp.isfinite(log_max),
+                       hinge(w[-1] - w[0] - jnp.where(jnp.isfinite(log_max), log_max, 0.0), BOUND_WIDTH[0]),
+                       0.0 * w[0])
     q = theta[k:k + cfg.n]
     over_q = hinge(q - data["hi"], BOUND_WIDTH[1]) + hinge(data["lo"] - q, BOUND_WIDTH[1])
     return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])

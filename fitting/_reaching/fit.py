@@ -1,29 +1,32 @@
-"""The per-subject fit of the λ0-PMP to HuG-MP movements (``fit_reaching``, ``ReachingFit``).
+"""The per-subject fit of the λ0-PMP to HuG-MP movements (``fit_reaching``, ``ReachingFit``): the
+HuG-MP case of ``fitting.fit_movements``.
 
-**Fit** (per subject, on the chosen repetitions only; all subjects in one compiled call, one after
-the other inside it by ``lax.map``, so each runs its own number of iterations). Stage 1 fits
-``KJ`` and ``q_rest`` to the final postures through ``pmpjax.equilibrium_posture`` (Donders' law of
-the arm; implicit gradients), by ``fitting.least_squares`` (Levenberg–Marquardt). Stage 2 starts
-there and fits every parameter to the residual ``[(q_sim − q_obs)(s_k) / √49, k = 1..49;
-(q_sim − q_obs)(1)]`` per motion [rad]: time-normalised joint trajectories through
-``pmpjax.simulate`` (forward-mode derivatives), with the simulated final posture weighted once
-more (the model's final posture is the equilibrium to within the motion left at ``s = 1``).
-Eq 10 makes the task dynamics stiff (the fastest rate is ``cond(B(q0))/τ0``, thousands per unit
-normalised time for anisotropic ``KJ``): the solver and its step count are chosen on the host from
-the stage-1 parameters (:func:`_integration`: the L-stable RODAS4 at 2 steps per sample for the
-Arimoto model, RK4 where it is stable and cheaper, as for the time-base generator), and the
-integration error at the optimum (against twice the steps) is checked and reported; above 0.01°
-the step count grows and stage 2 goes on. Both stages hold ``cond(KJ)`` below
-``stiffness_cond_max`` and the shoulder rest angles within the recorded range ± 20° (penalty
-residuals, smooth and negligible inside; reported when they bind). Converged means a relative cost change below
-1e-8 or every parameter within 0.014 standard errors of the optimum (``stol``).
-Standard errors: the delete-one-motion jackknife (``fitting._optimise.group_jackknife_covariance``)
-after stage 2, the Gauss–Newton ``fitting.covariance`` of stage 1 for a Donders-fitted model. A
-motion's samples share errors (its recorded start posture and target, misfit), which make the
-Gauss–Newton errors too small: on 16 noise replicates of 16 synthetic motions (0.2°) they were
-0.26–0.76 times the spread of the estimates. ``aic``/``bic`` from the Gaussian likelihood of the
-residuals (optimistic: samples of one movement are correlated; use them to rank models fitted to
-the same motions).
+**Fit** (per subject, on the chosen repetitions only). The screened HuG-MP motions
+(``fitting._reaching.motions``) become the segmented reaches of ``fit_movements`` (the window is
+the recording, the postures its first and last samples, fractions of the 20 %-of-peak duration
+``T``) and are fitted by its engine (``fitting._movements.fit._fit``; all subjects in one compiled
+call, one after the other inside it by ``lax.map``, so each runs its own number of iterations)
+on this module's model (``model._generic_config``: no target delay, no per-reach offsets, the
+elbow's rest angle held at its gauge). Stage 1 fits ``KJ`` and the shoulder rest angles to the
+final postures through ``pmpjax.equilibrium_posture`` (Donders' law of the arm; implicit
+gradients), by ``fitting.least_squares`` (Levenberg–Marquardt); a motion whose equilibrium does
+not exist at the start (``KJ = I``, ``q_rest`` = the mean final posture) is left out and reported.
+Stage 2 starts there and fits every parameter to the residual ``[(q_sim − q_obs)(s_k) / √49,
+k = 1..49; (q_sim − q_obs)(1)]`` per motion [rad]: time-normalised joint trajectories through
+``pmpjax.simulate`` (the L-stable RODAS4: Eq 10 makes the task dynamics stiff, the fastest rate
+``cond(B(q0))/τ0`` is thousands per unit normalised time for anisotropic ``KJ``; forward-mode
+derivatives), with the simulated final posture weighted once more. The integration error at the
+optimum (against twice the steps) is checked and reported; a subject above 0.01° is fitted again
+at twice the steps. Both stages hold ``cond(KJ)`` below ``stiffness_cond_max`` and the shoulder
+rest angles within the recorded range ± 20° (penalty residuals, smooth and negligible inside;
+reported when they bind). Converged means a relative cost change below 1e-8 or every parameter
+within 0.014 standard errors of the optimum (``stol``). Standard errors: the delete-one-motion
+jackknife (``fitting._optimise.group_jackknife_covariance``) after stage 2, the Gauss–Newton
+covariance of stage 1 for a Donders-fitted model. A motion's samples share errors (its recorded
+start posture and target, misfit), which make the Gauss–Newton errors too small: on 16 noise
+replicates of 16 synthetic motions (0.2°) they were 0.26–0.76 times the spread of the estimates.
+``aic``/``bic`` from the Gaussian likelihood of the residuals (optimistic: samples of one
+movement are correlated; use them to rank models fitted to the same motions).
 """
 
 from __future__ import annotations
@@ -31,7 +34,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from functools import partial
 from pathlib import Path
 
 import jax
@@ -40,37 +42,25 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import fast_compile_jit
 
 from .._ik import estimate_ik_weights, overspecified_joints
-from .._optimise import covariance, group_jackknife_covariance, least_squares, lm_iterations
+from .._movements import fit as mfit
+from .._movements import model as mcfg
+from .._movements.data import SubjectReaches
+from .._optimise import lm_iterations
 from .model import (
-    _N_K,
+    _ELBOW,
     _N_P,
     BOUND_WIDTH,
     DAMPINGS,
     INTEGRATION_TOL_DEG,
-    MAX_STEPS_PER_SAMPLE,
     MODELS,
     REST_MARGIN_DEG,
-    ROSENBROCK_COST,
-    ROSENBROCK_H_TAU,
-    ROSENBROCK_STEPS,
     STIFFNESS_COND_MAX,
     TIME_CONSTANTS,
-    _bound_residual,
-    _compiled_config,
     _Config,
-    _final_residual,
-    _model_and_planner,
+    _generic_config,
     _param_names,
-    _rates_host,
-    _simulate,
-    _stability_steps,
-    _stage2_start,
-    _tau0_W,
-    _trajectory_residual,
-    _unpack,
     _unpack_host,
 )
 from .motions import (
@@ -85,203 +75,73 @@ from .motions import (
 )
 
 
-@partial(fast_compile_jit, static_argnames=("cfg",))
-def _stage1_batch(theta0, data, max_steps, *, cfg: _Config):
-    """Stage 1 for all subjects (leading axis of ``theta0`` (S, 12) and of ``data``'s leaves):
-    ``KJ``, ``q_rest`` from the final postures; the iteration limit is traced (one compilation for
-    every limit)."""
-
-    def one(th0, dat):
-        r = least_squares(partial(_final_residual, cfg=cfg), th0, dat, max_steps=max_steps,
-                          ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
-        cov, se, sv, _ = covariance(r)
-        return dict(x=r.x, cost=r.cost, residual=r.residual, converged=r.converged, status=r.status, steps=r.steps,
-                    start=_stage2_start(r.x, cfg), cov=cov, se=se, sv=sv)
-
-    return jax.lax.map(lambda a: one(*a), (theta0, data))
-
-
-@partial(fast_compile_jit, static_argnames=("cfg",))
-def _start_usable(theta0, data, *, cfg: _Config):
-    """(S, B) bool: motions whose final-posture equilibrium exists at the stage-1 start."""
-
-    def one(th, dat):
-        return jnp.all(jnp.isfinite(_final_residual(th, dat, cfg)[:-4].reshape(-1, 4)), axis=-1)
-
-    return jax.lax.map(lambda a: one(*a), (theta0, data))
-
-
-@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
-def _stage2_batch(theta0, data, max_steps, *, cfg: _Config, steps: int, solver: str):
-    """Stage 2 for all subjects: every parameter from the trajectories; covariance at the end."""
-
-    def one(th0, dat):
-        r = least_squares(partial(_trajectory_residual, cfg=cfg, steps=steps, solver=solver), th0, dat,
-                          max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
-        cov, se, sv, _ = covariance(r)
-        return dict(x=r.x, cost=r.cost, residual=r.residual, jac=r.jac, converged=r.converged, status=r.status,
-                    steps=r.steps, cov=cov, se=se, sv=sv)
-
-    return jax.lax.map(lambda a: one(*a), (theta0, data))
-
-
-def _stack_motions(motions: list[_Motions], bucket: int = 16, cond_max: float = STIFFNESS_COND_MAX) -> dict:
-    """Pad subjects' motions to a common count (a multiple of ``bucket``; padding = copies of
-    the first motion with weight 0) -> dict of ``q_obs`` (S, B, 50, 4), ``t_ratio``, ``weight``
-    (S, B), ``elbow`` (S,) (the gauge of the unidentifiable elbow rest angle, module docstring: the
-    mean final elbow angle), ``lo``, ``hi`` (S, 3) (the bounds of the shoulder rest angles: the
-    recorded range widened by ``REST_MARGIN_DEG``), ``log_cond_max`` (S,) (the bound on cond(KJ),
-    inf: none; data rather than configuration, so that every bound shares one compile)."""
-    B = max(bucket, -(-max(len(m) for m in motions) // bucket) * bucket)
-    q, tr, w = [], [], []
-    for m in motions:
-        n = len(m)
-        pad = B - n
-        q.append(np.concatenate([m.q_obs, np.repeat(m.q_obs[:1], pad, 0)]))
-        tr.append(np.concatenate([m.t_ratio, np.repeat(m.t_ratio[:1], pad)]))
-        w.append(np.concatenate([np.ones(n), np.zeros(pad)]))
-    margin = np.deg2rad(REST_MARGIN_DEG)
-    return dict(q_obs=np.stack(q), t_ratio=np.stack(tr), weight=np.stack(w),
-                elbow=np.array([m.q_obs[:, -1, 3].mean() for m in motions]),
-                lo=np.stack([m.q_obs[..., :3].min((0, 1)) - margin for m in motions]),
-                hi=np.stack([m.q_obs[..., :3].max((0, 1)) + margin for m in motions]),
-                log_cond_max=np.full(len(motions), math.log(cond_max)))
-
-
-def _integration(theta, motions: list[_Motions], data: dict, cfg: _Config, solver=None, steps=None):
-    """``(solver, steps per sample interval)`` for stage 2 at ``theta`` (S, p): RK4 at the fewest
-    steps (``cfg.steps`` times a power of two) that keep every motion's fastest rate within half
-    of RK4's stability bound, unless RODAS4 at ``ROSENBROCK_STEPS`` costs less (one RODAS4 step
-    costs ``ROSENBROCK_COST`` RK4 steps; its step count: ``ROSENBROCK_H_TAU``) or RK4 would need
-    more than ``MAX_STEPS_PER_SAMPLE``.
-    A given ``solver`` or ``steps`` is kept."""
-    rates, taus = [], []
-    for th, e, m in zip(theta, data["elbow"], motions):
-        if not np.all(np.isfinite(th)):
-            continue
-        p = {k: v[0] for k, v in _unpack_host(th[None], cfg, np.atleast_1d(e)).items()}
-        tau0, W = _tau0_W(p, np.asarray(m.t_ratio, float))
-        rates.append(_rates_host(p["KJ"], W, tau0, m.q_obs[:, 0], minjerk=cfg.model != "lambda0"))
-        taus.append(np.min(tau0) if cfg.model != "lambda0" else min(np.min(tau0), np.min(p["tau"] * m.t_ratio)))
-    rates = np.concatenate(rates) if rates else np.zeros(1)
-    rk4_steps = _stability_steps(rates, cfg.steps)
-    ros_steps, h_max = ROSENBROCK_STEPS, ROSENBROCK_H_TAU * min(taus, default=1.0)
-    while 1.0 / ((SAMPLES - 1) * ros_steps) > h_max and ros_steps < MAX_STEPS_PER_SAMPLE:
-        ros_steps *= 2
-    if solver is None:
-        rk4_ok = _stable(rates, rk4_steps) and rk4_steps <= ROSENBROCK_COST * ros_steps
-        solver = "rk4" if rk4_ok else "rodas4"
-    if steps is None:
-        steps = rk4_steps if solver == "rk4" else ros_steps
-    return solver, int(steps)
-
-
-def _stable(rates, steps) -> bool:
-    """Every finite rate within RK4's stability bound (2.5 of 2.78) at ``steps`` per sample."""
-    rates = np.asarray(rates, float)
-    return bool(np.all(rates[np.isfinite(rates)] / ((SAMPLES - 1) * steps) <= 2.5))
-
-
-@partial(fast_compile_jit, static_argnames=("cfg", "steps", "solver"))
-def _integration_error_batch(theta, residual, data, *, cfg: _Config, steps: int, solver: str):
-    """(S,) largest joint difference [rad] over every used motion and sample between the fit's
-    simulations (read back from its stage-2 ``residual``) and simulations at ``2·steps`` per
-    sample: the integration error of the fit's, to within 1/15 (RK4, RODAS4: fourth order)."""
-
-    def one(th, res, dat):
-        p = _unpack(th, cfg, dat["elbow"])
-        model, planner, _, _ = _model_and_planner(p, dat["t_ratio"], cfg)
-        q_obs, w = dat["q_obs"], dat["weight"]
-        fine = _simulate(model, planner, q_obs[:, 0], _chain().fk(q_obs[:, -1]), 2 * steps, solver).q[:, 1:]
-        per = (SAMPLES - 1) * 4
-        r = res[: q_obs.shape[0] * (per + 4)].reshape(q_obs.shape[0], per + 4)[:, :per].reshape(-1, SAMPLES - 1, 4)
-        used = w > 0
-        fit = q_obs[:, 1:] + r * (math.sqrt(SAMPLES - 1) / jnp.sqrt(jnp.where(used, w, 1.0)))[:, None, None]
-        return jnp.max(jnp.where(used[:, None, None], jnp.abs(fit - fine), 0.0))
-
-    return jax.lax.map(lambda a: one(*a), (theta, residual, data))
+def _as_reaches(m: _Motions) -> SubjectReaches:
+    """HuG-MP motions as the segmented reaches of ``fit_movements``: the window is the recording
+    (``T_rec``), the postures its first and last samples, ``t_ratio = T/T_rec``."""
+    t = m.recording[:, None] * np.linspace(0.0, 1.0, SAMPLES)[None]
+    return SubjectReaches(m.subject, tuple(f"task{a}_rep{b}_motion{c}" for a, b, c in zip(m.task, m.rep, m.index)),
+                          np.asarray(m.index), t, m.q_obs, np.asarray(m.recording, float), m.q_obs[:, 0],
+                          m.q_obs[:, -1], (), np.asarray(m.t_ratio, float))
 
 
 def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100), theta0=None,
                  keep_jac: bool = False, steps: int | None = None, solver: str | None = None) -> dict:
-    """Fit every subject's usable motions (each ``len(m) >= 1``): stage 1, then (on the host) the
-    solver and step count for stage 2 from the stage-1 parameters (:func:`_integration`), then
-    stage 2 (skipped when ``max_steps[1] == 0``: a Donders-fitted model), then the integration
-    error at the optimum; while it exceeds ``INTEGRATION_TOL_DEG`` (up to twice) the step count
-    grows by the power of two its fourth order asks for and stage 2 goes on from there.
-    ``theta0`` (S, p) skips stage 1 and starts stage 2 there; ``steps``/``solver`` override the
-    automatic choice."""
-    data = _stack_motions(motions, cond_max=cfg.cond_max)
-    jcfg = _compiled_config(cfg)  # (the bound travels in data["log_cond_max"])
-    S = len(motions)
-    p = len(_param_names(cfg))
-    out, s1 = {}, None
-    q_final_mean = np.stack([m.q_obs[:, -1].mean(0) for m in motions])
-    out["elbow"], out["lo"], out["hi"] = data["elbow"], data["lo"], data["hi"]
-    out["dropped"] = [np.zeros(0, int) for _ in motions]
-    if theta0 is None:
-        th1 = np.concatenate([np.zeros((S, _N_K)), q_final_mean[:, :3]], -1)
-        # A motion whose equilibrium fails at the start (KJ = I, q_rest = mean final posture) would
-        # make the start non-finite and stop Levenberg–Marquardt for the whole subject: leave it out.
-        ok = np.asarray(_start_usable(th1, data, cfg=jcfg))
-        out["dropped"] = [np.flatnonzero(~ok[s, : len(m)]) for s, m in enumerate(motions)]
-        data["weight"] = data["weight"] * ok
-        s1 = jax.device_get(_stage1_batch(th1, data, np.int32(max_steps[0]), cfg=jcfg))
-        theta0 = s1["start"]
-        out.update(x1=s1["x"], cost1=s1["cost"], converged1=s1["converged"], steps1=s1["steps"])
+    """Fit every subject's usable motions (each ``len(m) >= 1``) by ``fit_movements``' engine
+    (``fitting._movements.fit._fit``: stage 1, stage 2 from there unless ``max_steps[1] == 0``,
+    the integration error at the optimum and the step refinement) on the HuG-MP model
+    (:func:`_generic_config`), the elbow's rest angle held at its gauge. ``theta0`` (S, p) skips
+    stage 1 and starts stage 2 there; ``steps``/``solver`` fix the integration. Returns the fit
+    in this module's parameters (``_param_names``: the elbow's rest angle left out), with the
+    delete-one-motion jackknife covariance after stage 2 (the Gauss–Newton one of stage 1 for a
+    Donders-fitted model) and the residual with the four bounds of ``_bound_residual`` last."""
+    gcfg = _generic_config(cfg)
+    S, P = len(motions), mcfg.n_params(gcfg)
+    free = np.array(mcfg.free_index(gcfg, P))
+    elbow = np.array([m.q_obs[:, -1, 3].mean() for m in motions])
+    if theta0 is not None:
+        theta0 = np.insert(np.asarray(theta0, float).reshape(S, P - 1), _ELBOW, elbow, axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (fit_reaching warns itself, naming its step option)
+        g = mfit._fit(_chain(), [_as_reaches(m) for m in motions], gcfg, max_steps, REST_MARGIN_DEG,
+                      theta0=theta0, steps=steps, solver=solver, identify=False, name="fit_reaching")
+    weight, B = g["weight"], g["B"]
+    bounds = B * SAMPLES * 4 + np.array([0, 1, 2, 3])  # (cond(KJ), the shoulder rest angles; not the elbow's)
+    margin = np.deg2rad(REST_MARGIN_DEG)
+    out = dict(elbow=elbow, dropped=g["dropped"], solver=g["solver"], steps_per_sample=int(g["steps"]),
+               integration_error_deg=np.asarray(g["integration_error_deg"], float), x=np.asarray(g["x"])[:, free],
+               cost=np.asarray(g["cost"]), converged=np.asarray(g["converged"]), status=np.asarray(g["status"]),
+               steps2=np.asarray(g["lm2"]),
+               lo=np.stack([m.q_obs[..., :3].min((0, 1)) - margin for m in motions]),
+               hi=np.stack([m.q_obs[..., :3].max((0, 1)) + margin for m in motions]))
+    s1 = g["stage1"]
+    if s1 is not None:
+        out.update(x1=np.asarray(s1["x"])[:, free[free < _N_P + 1]], cost1=s1["cost"], converged1=s1["converged"],
+                   steps1=s1["steps"])
     else:
-        theta0 = np.asarray(theta0, float).reshape(S, p)
-        out.update(x1=theta0[:, :_N_P], cost1=np.full(S, np.nan), converged1=np.ones(S, bool),
+        out.update(x1=out["x"][:, :_N_P], cost1=np.full(S, np.nan), converged1=np.ones(S, bool),
                    steps1=np.zeros(S, int))
-    fixed_steps = steps
-    solver, steps = _integration(theta0, motions, data, cfg, solver, steps)
-    out.update(solver=solver, steps_per_sample=steps, integration_error_deg=np.full(S, np.nan))
-    if max_steps[1] == 0 and s1 is not None:
-        # Donders-fitted model: the stage-1 result, extras at their tied start values
-        k = _N_P
-        pad = lambda a, *shape: np.concatenate([a, np.full(shape, np.nan)], -1)  # noqa: E731
+    used = [int(np.sum(weight[i] > 0)) for i in range(S)]
+    p = len(free)
+    if g["residual"] is None:  # a Donders-fitted model: stage 1's Gauss–Newton covariance
+        r1, J1 = np.asarray(s1["residual"]), np.asarray(s1["jac"])
+        keep = np.r_[np.arange(B * 4), B * 4 + np.array([0, 1, 2, 3])]
         cov = np.full((S, p, p), np.nan)
-        cov[:, :k, :k] = s1["cov"]
-        n_res = np.array([(len(m) - len(d)) * 4 for m, d in zip(motions, out["dropped"])])
-        fix = (s1["residual"].shape[-1] - k) / np.maximum(n_res - k, 1)
-        out.update(x=theta0, cost=s1["cost"], residual=s1["residual"], converged=s1["converged"],
-                   status=s1["status"], steps2=np.zeros(S, int), cov=cov * fix[:, None, None],
-                   se=pad(s1["se"] * np.sqrt(fix)[:, None], S, p - k), n_residuals=n_res, stage=1)
-        return out
-    lm_steps = np.zeros(S, int)
-    for refine in range(3):
-        s2 = jax.device_get(_stage2_batch(theta0, data, np.int32(max_steps[1]), cfg=jcfg, steps=steps, solver=solver))
-        lm_steps = lm_steps + s2["steps"]
-        if max_steps[1] == 0:  # (the residual and Jacobian at theta0 only)
-            err = np.full(S, np.nan)
-            break
-        err = np.rad2deg(np.asarray(_integration_error_batch(s2["x"], s2["residual"], data, cfg=jcfg, steps=steps,
-                                                             solver=solver)))
-        finite = np.all(np.isfinite(s2["x"]), axis=-1)
-        if fixed_steps is not None or refine == 2 or np.all(~finite | (err <= INTEGRATION_TOL_DEG)):
-            break
-        theta0 = np.where(finite[:, None], s2["x"], theta0)
-        # fourth order: the step count that brings the largest error below the tolerance
-        worst = float(np.max(np.where(finite, err, 0.0)))
-        steps *= 2 ** max(1, math.ceil(math.log2((worst / INTEGRATION_TOL_DEG) ** 0.25)))
-        steps = min(steps, MAX_STEPS_PER_SAMPLE)
-    out.update({k if k != "steps" else "steps2": v for k, v in s2.items()})
-    out.update(steps2=lm_steps, steps_per_sample=steps, integration_error_deg=err)
-    n_res = np.array([(len(m) - len(d)) * ((SAMPLES - 1) * 4 + 4) for m, d in zip(motions, out["dropped"])])
-    # The delete-one-motion jackknife (errors shared by a motion's samples: its start posture, its
-    # target, misfit); padding and left-out motions (weight 0) are in no group.
-    B, rows = data["weight"].shape[1], SAMPLES * 4
-    weight = np.asarray(data["weight"])
-    jac = out["jac"] if keep_jac else out.pop("jac")
-    cov = []
-    for i in range(S):
-        groups = np.concatenate([np.where(weight[i] > 0, np.arange(B), -1).repeat(rows),
-                                 np.full(out["residual"].shape[-1] - B * rows, -1)])
-        cov.append(group_jackknife_covariance(jac[i], out["residual"][i], groups, p))
-    out["cov"] = np.stack(cov)
+        for i in range(S):
+            sigma2 = 2.0 * float(s1["cost"][i]) / max(used[i] * 4 - _N_P, 1)
+            Jp = np.linalg.pinv(J1[i], rcond=1e-10)
+            cov[i, :_N_P, :_N_P] = sigma2 * Jp @ Jp.T
+        out.update(residual=r1[:, keep], cov=cov, n_residuals=np.array(used) * 4, stage=1)
+    else:
+        keep = np.r_[np.arange(B * SAMPLES * 4), bounds]
+        residual, jac = np.asarray(g["residual"])[:, keep], np.asarray(g["jac"])[:, keep]
+        # The delete-one-motion jackknife (errors shared by a motion's samples: its start posture,
+        # its target, misfit); padding and left-out motions (weight 0) are in no group.
+        cov = np.stack([mfit._reach_jackknife_covariance(g["jac"][i], g["residual"][i], gcfg, weight[i])
+                        for i in range(S)])
+        out.update(residual=residual, cov=cov, n_residuals=np.array(used) * SAMPLES * 4, stage=2)
+        if keep_jac:
+            out["jac"] = jac
     out["se"] = np.sqrt(np.clip(np.diagonal(out["cov"], axis1=1, axis2=2), 0.0, None))
-    out["n_residuals"] = n_res
-    out["stage"] = 2
     return out
 
 
@@ -434,10 +294,9 @@ def fit_reaching(
       in the paper). Stage 1 converges in under 80 iterations on the bundled subjects; its
       status is the Donders-only model's.
     - ``solver`` ("rk4", "rodas4") and ``steps_per_sample`` (steps per 1/49 of normalised time) of
-      stage 2: chosen from the stage-1 parameters when None (``_integration``: Eq 10's gain makes
-      the Arimoto model stiff, so RODAS4 at 2 steps; the time-base generator RK4 at 2), and the
-      step count doubled while the integration error at the optimum exceeds 0.01°. The result
-      says what was used (``solver``, ``steps_per_sample``, ``integration_error_deg``).
+      stage 2: when None, RODAS4 from 2 steps, doubled for a subject while its integration error
+      at the optimum exceeds 0.01° (up to 32); given, they are used as they are. The result says
+      what was used (``solver``, ``steps_per_sample``, ``integration_error_deg``).
     - ``stiffness_cond_max``: bound on cond(KJ) (None: no bound). Final postures alone leave
       ``KJ`` and ``q_rest`` poorly determined (one redundant joint: one equation per posture), and
       unbounded stage-1 fits drift to near-singular stiffness (cond 6 400 for S01) and rest angles
@@ -575,7 +434,7 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         wc, wq = 3 * BOUND_WIDTH[0], 3 * BOUND_WIDTH[1]
         active[a] = np.r_[log_over > -wc, (q3 - out["hi"][k] > -wq) | (out["lo"][k] - q3 > -wq)]
         active[a] |= _bound_pull_se(x, out["residual"][k], out["cov"][k], cost, n, out["lo"][k], out["hi"][k],
-                                    cfg) > BOUND_PULL_SE
+                                    cfg, out["elbow"][k]) > BOUND_PULL_SE
         status[a] = int(out["status"][k]) if np.isfinite(cost) else int(Status.NONFINITE)
     return ReachingFit(
         subjects=tuple(names), converged=status == 0, status=status, param_names=_param_names(cfg),
@@ -593,19 +452,22 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
 BOUND_PULL_SE = 0.1
 
 
-def _bound_pull_se(theta, residual, cov, cost, n_res, lo, hi, cfg) -> np.ndarray:
+def _bound_pull_se(theta, residual, cov, cost, n_res, lo, hi, cfg, elbow) -> np.ndarray:
     """(4,) how far each bound's penalty residual moves the optimum, in standard errors of the
     data alone (the largest over the parameters): the Gauss–Newton step ``H⁻¹ J_bᵀ r_b`` that
     dropping that penalty would take, with ``H`` the data's Gauss–Newton matrix (the fit's
     ``JᵀJ = σ² cov⁻¹`` less the bounds' ``J_bᵀ J_b``). The softplus penalties act some widths
     inside a bound too, and along a direction the data barely determine (a shoulder rest angle,
     say) a small pull moves the estimate far: a bound 5° inside where the data put a rest angle
-    holds it 2° inside the bound, beyond the three widths."""
+    holds it 2° inside the bound, beyond the three widths. ``residual``: its last four rows are
+    the bounds (cond(KJ), the shoulder rest angles)."""
     use = np.isfinite(np.diag(cov))  # stage 1 only: the postural parameters
     if not np.isfinite(cost) or cost <= 0 or n_res <= use.sum():
         return np.zeros(4)
-    bounds = {"lo": lo, "hi": hi, "log_cond_max": math.log(cfg.cond_max)}
-    Jb = np.asarray(jax.jacfwd(_bound_residual)(jnp.asarray(theta), bounds, cfg))[:, use]
+    gcfg = _generic_config(cfg)
+    bounds = {"lo": np.r_[lo, -np.inf], "hi": np.r_[hi, np.inf], "log_cond_max": math.log(cfg.cond_max)}
+    full = lambda z: jnp.insert(z, _ELBOW, elbow)  # noqa: E731
+    Jb = np.asarray(jax.jacfwd(lambda z: mcfg.bound_residual(full(z), bounds, gcfg)[:4])(jnp.asarray(theta)))[:, use]
     rb = np.asarray(residual)[-4:]
     sigma2 = 2.0 * cost / (n_res - use.sum())
     H = sigma2 * np.linalg.pinv(cov[np.ix_(use, use)]) - Jb.T @ Jb

@@ -1,4 +1,6 @@
-"""The λ0-PMP of a subject on normalised time: parameters, configurations, simulation, residuals.
+"""The λ0-PMP of a HuG-MP subject on normalised time: parameters, configurations, simulation — the
+segmented case of ``fitting._movements.model`` (:func:`_generic_config`), whose residuals the fit
+uses, with the elbow's rest angle held at the gauge below.
 
 **Normalised time.** Every model is integrated on ``s ∈ [0, 1]`` with all time constants divided
 by ``T_rec``: ``τ_s = τ / T_rec``. With ``W = τ0 W̃`` the λ0-PMP velocity scales as ``1/τ0`` and
@@ -35,7 +37,6 @@ determined. Compare ``q_rest`` between subjects or with other studies only up to
 from __future__ import annotations
 
 import dataclasses
-import math
 from functools import partial
 
 import jax
@@ -45,39 +46,32 @@ import numpy as np
 import pmpjax as pj
 from pmpjax.internal import fast_compile_jit, row_chunks
 
-from .._optimise import damping_start, log_stiffness, stiffness_from_params, sym_index
+from .._movements import model as mcfg
+from .._optimise import sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
-MAX_STEPS_PER_SAMPLE = 160  # RK4 steps per 1/49 of normalised time (7840 per movement)
-#: RODAS4 steps of the fits: at least 2 per sample interval, doubled until a step is at most
-#: ``ROSENBROCK_H_TAU`` of the fastest non-stiff time constant (``τ0``, ``τ``; stiffness itself
-#: costs RODAS4 no accuracy): 0.001° on the recordings (2 steps), 0.002° on the stiff synthetic
-#: movements of tests/test_reaching.py (4 steps); ``integration_error_deg`` checks it at the optimum.
+#: RK4 steps per 1/49 of normalised time at most, in ``predict_reaching``'s RK4 baselines.
+MAX_STEPS_PER_SAMPLE = 160
+#: RODAS4 steps per sample of the unfitted λ0-PMP baseline (the fits choose and check their own:
+#: ``fitting._movements.fit``).
 ROSENBROCK_STEPS = 2
-ROSENBROCK_H_TAU = 0.12
-#: Cost of one RODAS4 step in RK4 steps in the fits' forward-mode Jacobians (2.2 for a plain
-#: simulation; benchmarks/stiff.py): fits take RK4 when its stable step count costs less.
-ROSENBROCK_COST = 3.4
 #: Largest ``integration_error_deg`` a fit accepts silently (a warning above).
 INTEGRATION_TOL_DEG = 0.01
 #: Default bound on cond(KJ) (``fit_reaching(stiffness_cond_max=)``).
 STIFFNESS_COND_MAX = 100.0
 #: The fitted shoulder rest angles stay within the subject's recorded range widened by this [deg].
 REST_MARGIN_DEG = 20.0
-#: Weight of the bound residuals [rad per unit of violation]: stiff enough to hold a bound within
-#: about 1 % (the data residual's gradient is O(10)), soft enough for Levenberg–Marquardt.
-BOUND_WEIGHT = 30.0
-#: Softplus widths of the bounds: log cond(KJ) (2 % of the condition number), rest angles [rad];
-#: a bound counts as binding (``bound_active``) within three widths of it or beyond, or where its
-#: penalty moves the estimate by more than 0.1 standard errors (``fit._bound_pull_se``).
-BOUND_WIDTH = (0.02, 0.01)
-GAIN_CAP = 60.0  # 1/T_rec: cap of the time-base generator's task-velocity gain
-FINAL_WEIGHT = 1.0
+#: Softplus widths of the bounds (``fitting._movements.model.BOUND_WIDTH``): a bound counts as
+#: binding (``bound_active``) within three widths of it or beyond, or where its penalty moves the
+#: estimate by more than 0.1 standard errors (``fit._bound_pull_se``).
+BOUND_WIDTH = mcfg.BOUND_WIDTH
+GAIN_CAP = mcfg.GAIN_CAP  # 1/T_rec: cap of the time-base generator's task-velocity gain
 MODELS = ("lambda0", "lambda0_minjerk")
 DAMPINGS = ("tau0_KJ", "diagonal", "full")
 TIME_CONSTANTS = ("tied", "fitted")
 _N_K = 9  # free numbers of KJ (4×4 SPD, trace 4)
 _N_P = _N_K + 3  # postural parameters: KJ and the shoulder rest angles (the elbow's is not identifiable)
+_ELBOW = _N_P  # the elbow's rest angle among fit_movements' parameters (after KJ's 9 and q_rest[q1..q3])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,24 +79,12 @@ class _Config:
     model: str
     damping: str
     time_constants: str
-    steps: int  # least RK4 steps per sample interval (1/49 of normalised time) for accuracy
+    steps: int  # least RK4 steps per sample interval of predict_reaching's RK4 simulations
     ftol: float = 1e-8
     xtol: float = 1e-8
-    # Bound on cond(KJ) (inf: none). Read on the host only: the compiled fits take
-    # ``log cond_max`` from their data (``_stack_motions``), so every bound shares one compile,
-    # and they are called with :func:`_compiled_config` (this field at its default).
+    # Bound on cond(KJ) (inf: none; the compiled fits take it from their data: every bound shares a compile)
     cond_max: float = STIFFNESS_COND_MAX
     stol: float = 1e-4  # converged within 0.014 standard errors (fitting.least_squares)
-
-
-def _compiled_config(cfg: _Config) -> _Config:
-    """``cfg`` as the compiled fits see it (a static argument): ``cond_max`` at its default,
-    since they read the bound from ``data["log_cond_max"]``."""
-    return dataclasses.replace(cfg, cond_max=STIFFNESS_COND_MAX)
-
-
-def _damping_size(damping):
-    return {"tau0_KJ": 0, "diagonal": 3, "full": _N_K}[damping]
 
 
 def _param_names(cfg: _Config) -> tuple[str, ...]:
@@ -117,43 +99,36 @@ def _param_names(cfg: _Config) -> tuple[str, ...]:
     return names
 
 
+def _generic_config(cfg: _Config) -> mcfg.Config:
+    """The model of ``cfg`` as ``fit_movements``' (this module's HuG-MP case): 4 joints, segmented
+    motions (no delay, no per-reach offsets), fractions of T (or tied), the elbow's rest angle held
+    (the gauge of the module docstring)."""
+    return mcfg.Config(4, cfg.model, cfg.damping, "fractions" if cfg.time_constants == "fitted" else "tied",
+                       m=0, delay=False, hold=(_ELBOW,), cond_max=cfg.cond_max, ftol=cfg.ftol, xtol=cfg.xtol,
+                       stol=cfg.stol)
+
+
 def _unpack(theta, cfg: _Config, elbow) -> dict:
     """Parameters (p,) and the fixed elbow rest angle -> ``KJ`` (4, 4), ``q_rest`` (4,), ``W``
-    (4, 4) per unit τ0 (trace 4), ``tau``, ``tau0`` (fractions of T), ``duration`` (of T_rec)."""
-    KJ = stiffness_from_params(theta[:_N_K], 4, 4.0)
-    out = dict(KJ=KJ, q_rest=jnp.concatenate([theta[_N_K:_N_P], jnp.reshape(elbow, (1,)).astype(theta.dtype)]))
-    k = _N_P
-    nd = _damping_size(cfg.damping)
-    if cfg.damping == "tau0_KJ":
-        out["W"] = KJ
-    elif cfg.damping == "diagonal":
-        e = jnp.exp(jnp.concatenate([jnp.zeros(1, theta.dtype), theta[k:k + 3]]))
-        out["W"] = jnp.diag(4.0 * e / jnp.sum(e))
-    else:
-        out["W"] = stiffness_from_params(theta[k:k + _N_K], 4, 4.0)
-    k += nd
-    fifth = jnp.asarray(0.2, theta.dtype)
-    if cfg.time_constants == "fitted":
-        a, a0 = jnp.exp(theta[k]), jnp.exp(theta[k + 1])
-    else:
-        a, a0 = (1.0 if cfg.model == "lambda0_minjerk" else fifth), fifth
-    out["tau0"] = a0 * jnp.ones((), theta.dtype)
+    (4, 4) per unit τ0 (trace 4), ``tau``, ``tau0`` (fractions of T), ``duration`` (of T_rec):
+    ``fit_movements``' model (``fitting._movements.model.unpack``) with the elbow's rest angle
+    inserted."""
+    p = mcfg.unpack(jnp.insert(theta, _ELBOW, jnp.asarray(elbow, theta.dtype)), _generic_config(cfg))
+    nan = jnp.full((), jnp.nan, theta.dtype)
+    out = dict(KJ=p["KJ"], q_rest=p["q_rest"], W=p["W"], tau0=p["a0"] * jnp.ones((), theta.dtype))
     if cfg.model == "lambda0":
-        out["tau"], out["duration"] = a * jnp.ones((), theta.dtype), jnp.full((), jnp.nan, theta.dtype)
+        out["tau"], out["duration"] = p["a"] * jnp.ones((), theta.dtype), nan
     else:
-        out["tau"], out["duration"] = jnp.full((), jnp.nan, theta.dtype), a * jnp.ones((), theta.dtype)
+        out["tau"], out["duration"] = nan, p["a"] * jnp.ones((), theta.dtype)
     return out
 
 
 def _stage2_start(theta1, cfg: _Config):
-    """Stage-2 start: stage-1 ``KJ``, ``q_rest``; free ``W̃`` starts at ``KJ`` (``"full"``: the
-    paper's model) or at ``diag KJ`` (``"diagonal"``), time constants at their tied values."""
-    KJ = stiffness_from_params(theta1[:_N_K], 4, 4.0)
-    parts = [theta1, damping_start(KJ, cfg.damping)]
-    if cfg.time_constants == "fitted":
-        first = 0.0 if cfg.model == "lambda0_minjerk" else math.log(0.2)
-        parts.append(jnp.array([first, math.log(0.2)], theta1.dtype))
-    return jax.lax.stop_gradient(jnp.concatenate(parts))
+    """Stage-2 start from the stage-1 parameters (``KJ``, the shoulder rest angles):
+    ``fit_movements``' (free ``W̃`` at ``KJ`` (``"full"``) or ``diag KJ`` (``"diagonal"``), time
+    constants at their tied values)."""
+    th = mcfg.stage2_start(jnp.insert(theta1, _ELBOW, 0.0), _generic_config(cfg))
+    return jax.lax.stop_gradient(jnp.delete(th, _ELBOW, assume_unique_indices=True))
 
 
 def _tau0_W(p: dict, t_ratio):
@@ -223,69 +198,6 @@ def _simulate(model, planner, q0, target, steps: int, solver: str):
     """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` steps each."""
     return pj.simulate(model, planner, q0, target, duration=1.0, dt=1.0 / ((SAMPLES - 1) * steps),
                        saveat=pj.SaveAt(ts=_SAMPLE_TIMES), solver=solver)
-
-
-def _equilibria(p, target, q_final):
-    eq = pj.equilibrium_posture(_chain(), p["KJ"], p["q_rest"], target, q_init=q_final)
-    return eq.q, eq.converged
-
-
-def _bound_residual(theta, data, cfg: _Config):
-    """The bounds as residuals (4,) [rad]: ``BOUND_WEIGHT`` times how far ``log cond(KJ)`` exceeds
-    ``data["log_cond_max"]`` (a traced value: every bound shares one compile; inf: no bound), and
-    how far each shoulder rest angle lies outside ``[lo, hi]``, each through a softplus of width
-    ``BOUND_WIDTH`` (smooth, so Levenberg–Marquardt does not crawl along a kink; negligible a few
-    widths inside, where the fit is unregularised)."""
-    hinge = lambda g, width: width * jax.nn.softplus(g / width)  # noqa: E731
-    w = jnp.linalg.eigvalsh(log_stiffness(theta[:_N_K], 4))
-    log_max = jnp.asarray(data["log_cond_max"], w.dtype)
-    # (no bound: exactly 0 with a zero derivative, as softplus(-inf) would give NaN derivatives here)
-    over_c = jnp.where(jnp.isfinite(log_max),
-                       hinge(w[-1] - w[0] - jnp.where(jnp.isfinite(log_max), log_max, 0.0), BOUND_WIDTH[0]),
-                       0.0 * w[0])
-    q = theta[_N_K:_N_P]
-    over_q = hinge(q - data["hi"], BOUND_WIDTH[1]) + hinge(data["lo"] - q, BOUND_WIDTH[1])
-    return BOUND_WEIGHT * jnp.concatenate([jnp.reshape(over_c, (1,)), over_q])
-
-
-def _final_residual(theta, data, cfg: _Config):
-    """Stage 1: ``(q_eq − q_obs(1)) √w`` (B·4,) [rad], equilibria of the fitted ``KJ``, ``q_rest``,
-    then the bounds (4,). ``data``: dict of ``q_obs`` (B, 50, 4), ``t_ratio``, ``weight`` (B,),
-    ``elbow`` (), ``lo``, ``hi`` (3,)."""
-    q_obs, weight = data["q_obs"], data["weight"]
-    # stage 1 has only the postural parameters (KJ, q_rest): unpack them as the paper model
-    p = _unpack(theta, dataclasses.replace(cfg, damping="tau0_KJ", time_constants="tied"), data["elbow"])
-    q_eq, ok = _equilibria(p, _chain().fk(q_obs[:, -1]), q_obs[:, -1])
-    used = (weight > 0)[:, None]
-    r = jnp.where(used, (q_eq - q_obs[:, -1]) * jnp.sqrt(weight)[:, None], 0.0)  # left-out motions: 0
-    r = jnp.where(ok[:, None] | ~used, r, jnp.nan).reshape(-1)
-    return jnp.concatenate([r, _bound_residual(theta, data, cfg)])
-
-
-def _trajectory_residual(theta, data, cfg: _Config, steps: int, solver: str):
-    """Stage 2: per motion ``(q_sim − q_obs)(s_k) √(w/49)``, k = 1..49, and
-    ``FINAL_WEIGHT (q_sim − q_obs)(1) √w`` (B·(49·4 + 4),) [rad], then the bounds (4,). Motions
-    whose simulation fails, or (RK4) whose fastest rate would make RK4 unstable at this step size
-    (``rate·h > 2.5``, the check ``pmpjax.simulate`` makes outside ``jit``), give NaN, so LM
-    rejects such parameters."""
-    q_obs, t_ratio, weight = data["q_obs"], data["t_ratio"], data["weight"]
-    p = _unpack(theta, cfg, data["elbow"])
-    model, planner, tau0, W = _model_and_planner(p, t_ratio, cfg)
-    traj = _simulate(model, planner, q_obs[:, 0], _chain().fk(q_obs[:, -1]), steps, solver)
-    if solver == "rk4":
-        rate = _rates(*jax.lax.stop_gradient((p["KJ"], W, tau0, q_obs[:, 0])), minjerk=cfg.model != "lambda0")
-        stable = rate / ((SAMPLES - 1) * steps) <= 2.5
-    else:
-        stable = True
-    sw = jnp.sqrt(weight)
-    d = traj.q - q_obs
-    r = jnp.concatenate([(d[:, 1:] * (sw / math.sqrt(SAMPLES - 1))[:, None, None]).reshape(d.shape[0], -1),
-                         d[:, -1] * (FINAL_WEIGHT * sw)[:, None]], axis=1)
-    used = weight > 0
-    r = jnp.where(used[:, None], r, 0.0)  # left-out and padding motions contribute nothing
-    # INACCURATE is judged at the optimum (integration_error_deg), not by rejecting LM's trial steps.
-    good = (((traj.status == int(pj.Status.SUCCESSFUL)) | (traj.status == int(pj.Status.INACCURATE))) & stable) | ~used
-    return jnp.concatenate([jnp.where(good[:, None], r, jnp.nan).reshape(-1), _bound_residual(theta, data, cfg)])
 
 
 def _stability_steps(rates, minimum, *, margin=1.25):
