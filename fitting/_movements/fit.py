@@ -4,7 +4,8 @@ on any chain, from continuous joint-angle recordings.
 **Fit** (per subject; all subjects in one compiled call, one after the other inside it by
 ``lax.map``). Stage 1 fits ``KJ`` and ``q_rest`` to the final postures through
 ``pmpjax.equilibrium_posture`` (Donders' law), from ``KJ = I`` and ``q_rest`` = the mean final
-posture. **Identifiability:** at the optimum the residual Jacobian of the trajectories (data
+posture (a reach whose equilibrium does not exist there is left out and named in ``skipped``).
+**Identifiability:** at the optimum the residual Jacobian of the trajectories (data
 rows) is decomposed; its right singular vectors with singular values below
 ``IDENTIFIABILITY_RCOND`` of the largest are directions the data cannot determine (on the HuG-MP
 arm: shifting ``q_rest`` along ``KJ⁻¹ e_elbow``, which no movement and no final posture sees).
