@@ -240,6 +240,9 @@ def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
 
 @pytest.mark.parametrize("name, old, new, expect", [
     ("simulate_figure3.toml", "q0_deg = [5, 0, 0]", "q0 = [25, 0, 0]", "above 2π rad.*degrees"),
+    # (angles given in degrees beyond the wrist's range: refused as such, without a hint that they are degrees)
+    ("simulate_figure3.toml", "q_rest_deg = [5, 0, 0]", "q_rest_deg = [200, 0, 0]",
+     r"model\.q_rest_deg = 200° \(index 0\) is beyond any Wrist joint's range \(±180°\)$"),
     ("simulate_figure3.toml", "duration = 0.4", "duration = 400000", "milliseconds"),
     ("simulate_figure3.toml", "duration = 0.4", "duration = 1e300", "milliseconds"),
     ("pointing_example.csv", None, "ms", "milliseconds"),

@@ -88,6 +88,18 @@ def _checked(path, check, *args, **kwargs):
         raise ConfigError(f"{path}: {e}") from None
 
 
+def _degrees(path, chain, name, deg):
+    """``deg`` [°] in radians, refused beyond the chain's joint range (as ``simulate`` refuses
+    radians, but without its hint that the values may be degrees: they are)."""
+    limit = np.rad2deg(getattr(chain, "angle_error", None) or 2 * np.pi)
+    beyond = np.abs(deg) > limit * (1 + 1e-12)
+    if np.any(beyond):
+        i = int(np.argmax(beyond))
+        raise ConfigError(f"{path}: {name} = {deg[i]:g}° (index {i}) is beyond any {type(chain).__name__} joint's "
+                          f"range (±{limit:.0f}°)")
+    return np.deg2rad(deg)
+
+
 def _array(path, name, value, shape=None):
     try:
         a = np.asarray(value, dtype=float)
@@ -187,7 +199,8 @@ def build_simulation(cfg: dict, path="<config>", extra_tables=()):
     else:
         raise ConfigError(f"{path}: missing key model.KJ (or model.KJ_diag)")
     if "q_rest_deg" in cfg.get("model", {}):
-        q_rest = np.deg2rad(_array(path, "model.q_rest_deg", cfg["model"]["q_rest_deg"], (n,)))
+        q_rest = _degrees(path, chain, "model.q_rest_deg", _array(path, "model.q_rest_deg", cfg["model"]["q_rest_deg"],
+                                                                   (n,)))
     else:
         q_rest = _array(path, "model.q_rest", _get(cfg, path, "model", "q_rest", np.zeros(n)), (n,))
         _checked(path, chain.check_angles, "model.q_rest", q_rest)
@@ -250,7 +263,7 @@ def _build(cfg, path, chain, mtype, KJ, q_rest, W, tau0):
 
     sim = cfg.get("simulation", {})
     if "q0_deg" in sim:
-        q0 = np.deg2rad(_array(path, "simulation.q0_deg", sim["q0_deg"], (n,)))
+        q0 = _degrees(path, chain, "simulation.q0_deg", _array(path, "simulation.q0_deg", sim["q0_deg"], (n,)))
     else:
         q0 = _array(path, "simulation.q0", sim.get("q0", q_rest), (n,))
         _checked(path, chain.check_angles, "simulation.q0", q0)
