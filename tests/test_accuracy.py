@@ -157,6 +157,20 @@ def test_adaptive_steps_match_radau_on_sequences_and_count_their_steps():
     assert simulate_module._run_adaptive._cache_size() == compiled
 
 
+def test_the_default_adaptive_allowance_is_4096_steps():
+    # Documented (numerics): at most max_steps = 4096 adaptive steps per movement by default. The RK4
+    # sequence above with a stiffer gain needs ≈ 0.84 k steps (stability, not accuracy; measured with
+    # explicit allowances): 4195 at k = 5000 (MAX_STEPS by default), 3782 at k = 4500 (SUCCESSFUL).
+    ts = np.linspace(0.0, T, 11)
+
+    def status(k):
+        return int(pj.simulate_sequence(model(), pj.ArimotoPlanner(k=k, tau=0.08), Q_REST,
+                                        np.stack([TARGETS[2], np.zeros(2)]), duration=T, dt=None,
+                                        saveat=pj.SaveAt(ts=tuple(ts))).status)
+
+    assert status(5000.0) == int(pj.Status.MAX_STEPS) and status(4500.0) == 0
+
+
 def test_adaptive_forward_derivatives_match_central_differences_of_radau():
     # d q(T) / d (k, τ) through the adaptive run (jax.jacfwd) against central differences of Radau.
     ts = np.array([0.0, T])
