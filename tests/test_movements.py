@@ -134,11 +134,13 @@ def objective(fit, subject="P1"):
     assert B % BATCH == 0 and fit.model == "lambda0" and fit.damping == "tau0_KJ"
     target = np.stack([arm4_fk(q) for q in sr.q_end])
     amplitude = np.linalg.norm(target - np.stack([arm4_fk(q) for q in sr.q_start]), axis=1)
-    spread = np.c_[np.full(B, mdl.REACH_DELAY_SD), mdl.REACH_TARGET_SD * amplitude[:, None] * np.ones(k - 1)]
-    margin = np.deg2rad(mdl.REST_MARGIN_DEG)
+    # the documented priors (30 ms; 2 % of the amplitude), bounds (cond 100, rest ± 90°, widths
+    # 0.02 and 0.01 rad, weight 30) and prior weight (0.1° RMS): numbers, not the module's constants
+    spread = np.c_[np.full(B, 0.03), 0.02 * amplitude[:, None] * np.ones(k - 1)]
+    margin = np.deg2rad(90.0)
     lo, hi = sr.q_obs.min((0, 1)) - margin, sr.q_obs.max((0, 1)) + margin
     rest = [fit.param_names.index(f"q_rest[{j}]") for j in fit.joint_names]
-    cond_max, (width_c, width_q) = mdl.STIFFNESS_COND_MAX, mdl.BOUND_WIDTH  # (the fit's default bound)
+    cond_max, (width_c, width_q) = 100.0, (0.02, 0.01)  # (the fit's default bound)
 
     def hinge(g, width):
         return width * np.logaddexp(0.0, g / width)
@@ -160,9 +162,9 @@ def objective(fit, subject="P1"):
         rows = np.concatenate([d[:, 1:].reshape(B, -1) / math.sqrt(SAMPLES - 1), d[:, -1]], axis=1)
         ev = np.linalg.eigvalsh(np.asarray(par["KJ"]))
         q_rest = th[rest]
-        bounds = mdl.BOUND_WEIGHT * np.r_[hinge(math.log(ev[-1] / ev[0]) - math.log(cond_max), width_c),
+        bounds = 30.0 * np.r_[hinge(math.log(ev[-1] / ev[0]) - math.log(cond_max), width_c),
                                           hinge(q_rest - hi, width_q) + hinge(lo - q_rest, width_q)]
-        prior = u / spread * math.radians(mdl.PRIOR_RMS_DEG) * math.sqrt(n)
+        prior = u / spread * math.radians(0.1) * math.sqrt(n)
         return np.concatenate([rows.ravel(), bounds, prior.ravel()])
 
     x = np.r_[fit.params[a], np.c_[fit.reach_delays[subject] - fit.delay[a], fit.reach_target_offsets[subject]].ravel()]

@@ -22,12 +22,18 @@ delay offset ``δ_b`` (Arimoto; the lead from the target's onset to the detected
 reach to reach by tens of milliseconds: the smoothed speed, the reach's direction) and its target
 offset ``Δx_b`` (m task coordinates: the model's target is the hand at the end of the window,
 ``fk(q_end)``, which falls short where the recorded hand was still creeping on when the next reach
-began; λ0-PMP approaches are asymptotic). Weak priors ``δ_b ~ N(0, REACH_DELAY_SD)`` and
-``Δx_b ~ N(0, REACH_TARGET_SD·|amplitude|)`` (one residual row each, scaled so that one prior
-spread weighs as a ``PRIOR_RMS_DEG`` joint error over the reach) pin those of padding and of
-reaches whose data do not show them. Measured on noise-free recordings of the SciPy reference
+began; λ0-PMP approaches are asymptotic). Weak priors ``δ_b ~ N(0, 30 ms)`` (``REACH_DELAY_SD``;
+with fractions, 0.03 of the reach's duration) and ``Δx_b ~ N(0, 0.02·|amplitude|)``
+(``REACH_TARGET_SD``) (one residual row each, ``u/spread · 0.1° · √n``: one prior spread weighs
+as a 0.1° RMS joint error over the reach, ``PRIOR_RMS_DEG``) pin those of padding and of reaches
+whose data do not show them. Measured on noise-free recordings of the SciPy reference
 (3-joint planar arm, 16 reaches): one delay for all reaches and the targets as recorded left τ
 and τ0 6–7 % off; with both offsets, 0.8 % and 1.1 %.
+
+**Bounds** (residual rows after the reaches'): ``30·w·softplus(g/w)`` of how far ``log cond(KJ)``
+exceeds ``log 100`` (``w = 0.02``; ``fit_movements(stiffness_cond_max=)``) and how far each rest
+angle lies outside its joint's recorded range widened by 90° (``w = 0.01`` rad;
+``rest_margin_deg``): smooth, negligible a few widths inside.
 
 **Normalised time.** Every reach (from rest before its onset to rest after its offset, duration
 ``T``) is integrated on ``s ∈ [0, 1]`` with time constants divided by ``T`` (so reaches of every
