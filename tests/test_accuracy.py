@@ -182,7 +182,8 @@ def test_adaptive_forward_derivatives_match_central_differences_of_radau():
                          saveat=pj.SaveAt(final=True), solver="rodas4", rtol=0.0, atol=1e-6)
         return tr.q[-1]
 
-    d = np.asarray(jax.jacfwd(final)(jnp.asarray(p0)))  # (3, 2)
+    # (compiled whole: one program instead of the kernel's and some seventy eager operations' compiles)
+    d = np.asarray(jax.jit(jax.jacfwd(final))(jnp.asarray(p0)))  # (3, 2)
     fd = np.stack([(radau(Q_REST, x_d, *(p0 + h * e), ts)[-1] - radau(Q_REST, x_d, *(p0 - h * e), ts)[-1]) / (2 * h)
                    for h, e in ((0.05, np.array([1.0, 0.0])), (1e-5, np.array([0.0, 1.0])))], -1)
     assert np.all(np.abs(d - fd) <= 1e-2 * np.abs(fd) + 1e-3 * np.abs(fd).max(axis=0)), (d, fd)

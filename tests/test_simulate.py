@@ -143,7 +143,9 @@ def test_batch_equals_single_runs(rng):
     for i in range(B):
         one = pj.simulate(lam0(KJ[i]), planner, q0[i], targets[i], **kw)
         np.testing.assert_allclose(batch.q[i], one.q, rtol=0, atol=1e-13)
-    vm = jax.vmap(lambda q, x: pj.simulate(lam0(), planner, q, x, **kw).q)(jnp.asarray(q0), jnp.asarray(targets))
+    # (compiled whole: one program instead of the kernel's and some sixty eager operations' compiles)
+    vm = jax.jit(jax.vmap(lambda q, x: pj.simulate(lam0(), planner, q, x, **kw).q))(jnp.asarray(q0),
+                                                                                   jnp.asarray(targets))
     np.testing.assert_allclose(vm[0], pj.simulate(lam0(), planner, q0[0], targets[0], **kw).q, atol=1e-13)
 
 
