@@ -111,7 +111,9 @@ def _grads(mode, wrist, cache={}):
     if mode not in cache:
         diff = jax.grad if mode == "rev" else jax.jacfwd
         args = (jnp.asarray(KJ1), jnp.asarray(QR1), jnp.asarray(TARGETS[1:3]))
-        cache[mode] = diff(_loss, argnums=(0, 1, 2))(*args, wrist)
+        # (compiled whole: the traced solver's path either way, one program instead of the eager
+        # transformation's compile of every operation)
+        cache[mode] = jax.jit(lambda *a: diff(_loss, argnums=(0, 1, 2))(*a, wrist))(*args)
     return cache[mode]
 
 
