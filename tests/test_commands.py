@@ -567,3 +567,17 @@ def test_a_script_beside_a_clone_named_pmpjax_is_told_why_fitting_cannot_import(
         f"ImportError: Python imported the folder {tmp_path / 'pmpjax'} instead of the installed pmpjax (a script "
         "or python -m run in the folder that holds a clone named pmpjax puts that folder first): run it from any "
         "other folder"), proc.stderr
+
+
+def test_simulate_writes_no_negative_zeros(tmp_path, monkeypatch):
+    """trajectories.csv: a coordinate that is -0.0 (the screen point of the start posture, x1 of
+    Figure 3's first sample) is written 0, not -0."""
+    def simulate(model, planner, q0, targets, **k):
+        S = 3
+        return types.SimpleNamespace(t=np.linspace(0, 0.4, S), q=np.full((len(targets), S, 3), -0.0),
+                                     x=np.full((len(targets), S, 2), -0.0), status=np.zeros(len(targets), int))
+
+    monkeypatch.setattr(pj, "simulate", simulate)
+    assert cli.main(["simulate", example("simulate_figure3.toml"), "--out", str(tmp_path)]) == 0
+    rows = (tmp_path / "trajectories.csv").read_text().splitlines()[1:]
+    assert rows[0] == "N,0,0,0,0,0,0" and not any("-0" in r for r in rows), rows[:3]

@@ -34,7 +34,8 @@ def run_simulation_config(path, out) -> dict:
                       *(f"x{i + 1} [m]" for i in range(x.shape[-1]))])]
     for b, name in enumerate(opt["names"]):
         for s in range(t.shape[0]):
-            rows.append(",".join([name, f"{t[s]:.6g}", *(f"{v:.9g}" for v in q[b, s]), *(f"{v:.9g}" for v in x[b, s])]))
+            rows.append(",".join([name, f"{t[s]:.6g}", *(f"{v + 0.0:.9g}" for v in q[b, s]),  # (+ 0.0: no "-0")
+                                  *(f"{v + 0.0:.9g}" for v in x[b, s])]))
     (out / "trajectories.csv").write_text("\n".join(rows) + "\n")
     fig, ax = plt.subplots(figsize=(5, 5))
     for b, name in enumerate(opt["names"]):
