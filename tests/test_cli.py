@@ -449,9 +449,10 @@ def test_stopping_the_command_stops_its_worker_processes(tmp_path, stop):
         assert not any(_alive(p) for p in pids), "worker processes outlived the stopped command"
         if stop == "Ctrl-C":
             assert proc.returncode == 130, err
-            assert err.strip().splitlines() == [f"pmpjax reproduce: interrupted; the finished parts are in "
-                                                f"{tmp_path / 'out'}/results.json; run the same command again "
-                                                "to run the others"], err
+            # (no part finished: the message points to no results.json, which does not exist)
+            assert not (tmp_path / "out" / "results.json").exists()
+            assert err.strip().splitlines() == ["pmpjax reproduce: interrupted; no part had finished; run the same "
+                                                "command again to run them"], err
     finally:
         for p in pids:
             with contextlib.suppress(ProcessLookupError):

@@ -104,8 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--jobs", "-j", type=positive_int, default=None, metavar="N",
                      help=f"worker processes running parts at once (default: the usable cores, "
                           f"here {default_jobs()}; 1 runs in this process)")
-    rep.set_defaults(func=_reproduce_cmd, resume=lambda args: f"the finished parts are in {args.out}/results.json; "
-                     "run the same command again to run the others")
+    rep.set_defaults(func=_reproduce_cmd, resume=_reproduce_resume)
     from .simulate import add_simulate_command
 
     add_simulate_command(sub)
@@ -117,6 +116,15 @@ def build_parser() -> argparse.ArgumentParser:
             if p.formatter_class is argparse.HelpFormatter:
                 p.formatter_class = _KeepBlocks
     return parser
+
+
+def _reproduce_resume(args) -> str:
+    """What an interrupted main job kept and how to go on."""
+    from pathlib import Path
+
+    if (Path(args.out) / "results.json").is_file():
+        return f"the finished parts are in {args.out}/results.json; run the same command again to run the others"
+    return "no part had finished; run the same command again to run them"
 
 
 def _reproduce_cmd(args) -> int:
