@@ -95,3 +95,17 @@ def test_tied_time_constants_are_a_fifth_of_the_movement(model):
         np.testing.assert_allclose(planner.tau, 0.2 * np.asarray(ratio))
     else:
         np.testing.assert_allclose(planner.duration, 1.0)
+
+
+def test_refusals_before_any_fit_name_the_option_and_each_recording():
+    import fitting
+
+    chain = pj.PlanarArm([L1, L2])
+    with pytest.raises(ValueError, match=r"unknown key 'nope'.*options of pmpjax.find_movements are .*min_peak_speed"):
+        fitting.fit_movements(chain, [_motion()], find_options={"nope": 1})
+    with pytest.raises(ValueError, match=r"unknown key 'smoothing_hz'.*segmented recordings are onset, smoothing"):
+        fitting.fit_movements(chain, [_motion()], segmented=True, find_options={"smoothing_hz": 6.0})
+    # nothing moves in "still": the refusal names the recording, its stretch and why
+    still = pj.JointRecording("A", "still", np.arange(0.0, 2.0, 0.01), np.full((200, 2), 0.5), ("q1", "q2"), fs=FS)
+    with pytest.raises(ValueError, match=r"no subject has a usable reach: A: still: .*0\.00–1\.99 s: hand speed never"):
+        fitting.fit_movements(chain, [still], segmented=True)

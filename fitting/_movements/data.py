@@ -182,6 +182,34 @@ def hand_positions(chain, q):
     return chain.fk(q)
 
 
+def check_find_options(find_options, segmented: bool) -> dict:
+    """``find_options`` as a dict of ``pmpjax.find_movements``' keyword options (segmented
+    recordings: ``onset``, ``smoothing``); an unknown key is refused by name with the valid ones."""
+    import inspect
+
+    if find_options is None:
+        return {}
+    if not isinstance(find_options, dict):
+        raise TypeError(f"`find_options` must be a dict of options, got {type(find_options).__name__}")
+    valid = ("onset", "smoothing") if segmented else tuple(
+        k for k, v in inspect.signature(pj.find_movements).parameters.items() if v.kind is v.KEYWORD_ONLY)
+    unknown = sorted(set(find_options) - set(valid))
+    if unknown:
+        what = "segmented recordings" if segmented else "pmpjax.find_movements"
+        raise ValueError(f"`find_options` has unknown {'key' if len(unknown) == 1 else 'keys'} "
+                         f"{', '.join(map(repr, unknown))}; the options of {what} are {', '.join(valid)}")
+    return dict(find_options)
+
+
+def skipped_summary(skipped) -> str:
+    """``(recording, t_from, t_to, reason)`` rows as one line per recording: each stretch's window
+    [s] and reason."""
+    by: dict = {}
+    for rec, a, b, why in skipped:
+        by.setdefault(rec, []).append(f"{a:.2f}–{b:.2f} s: {why}")
+    return "; ".join(f"{rec}: " + ", ".join(v) for rec, v in by.items()) or "no movement found"
+
+
 def _rest_mean(rec, t: float):
     """The mean recorded posture (n,) over the ``REST_AVERAGE`` seconds up to ``t`` (the hand at rest
     there): one noisy sample as the model's start or target would bias the fit, and a low-pass

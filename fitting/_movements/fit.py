@@ -51,7 +51,16 @@ from pmpjax.internal import fast_compile_jit
 
 from .._optimise import group_jackknife_covariance, least_squares, lm_iterations, spd_size
 from . import model as mdl
-from .data import SAMPLES, SubjectReaches, check_recordings, group_by_subject, segmented_reaches, subject_reaches
+from .data import (
+    SAMPLES,
+    SubjectReaches,
+    check_find_options,
+    check_recordings,
+    group_by_subject,
+    segmented_reaches,
+    skipped_summary,
+    subject_reaches,
+)
 from .data import hand_positions as _fk
 
 #: Singular values below this fraction of the largest mark unidentified directions.
@@ -414,11 +423,12 @@ def fit_movements(
     joints = tuple(recordings[0].joint_names)
     by_subject = group_by_subject(recordings)
     reaches = segmented_reaches if segmented else subject_reaches
-    found = {s: reaches(s, recs, chain, dict(find_options or {})) for s, recs in by_subject.items()}
+    options = check_find_options(find_options, bool(segmented))
+    found = {s: reaches(s, recs, chain, options) for s, recs in by_subject.items()}
     usable = {s: r for s, r in found.items() if len(r) > 0}
     if not usable:
         raise ValueError("no subject has a usable reach: " + "; ".join(
-            f"{s}: {len(r.skipped)} stretches skipped" for s, r in found.items()))
+            f"{s}: {skipped_summary(r.skipped)}" for s, r in found.items()))
     empty = [s for s in found if s not in usable]
     if empty:
         warnings.warn(f"fit_movements: no usable reach for {', '.join(empty)} (TOO_FEW_DATA)", stacklevel=2)

@@ -18,7 +18,16 @@ from pmpjax import Status
 from pmpjax.internal import without_unit_checks
 
 from . import model as mdl
-from .data import SAMPLE_TIMES, SAMPLES, check_recordings, group_by_subject, segmented_reaches, subject_reaches
+from .data import (
+    SAMPLE_TIMES,
+    SAMPLES,
+    check_find_options,
+    check_recordings,
+    group_by_subject,
+    segmented_reaches,
+    skipped_summary,
+    subject_reaches,
+)
 from .fit import MovementFit, _fk, subject_model
 
 BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
@@ -141,6 +150,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
         raise TypeError(f"`fit` must be a fitting.MovementFit (fitting.fit_movements), got {type(fit).__name__}")
     chain = fit.chain
     recordings = check_recordings(recordings, chain)
+    options = check_find_options(find_options, fit.segmented)
     rows = {k: [] for k in ("subject", "recording", "t", "q_obs", "q_pred", "status")}
     base = {b: {"q_pred": [], "status": []} for b in BASELINES}
     skipped, problems = {}, {}
@@ -149,7 +159,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
             problems[subject] = f"{subject}: not fitted (subjects with parameters: {', '.join(fit.subjects)})"
             continue
         reaches = segmented_reaches if fit.segmented else subject_reaches
-        sr = reaches(subject, recs, chain, dict(find_options or {}))
+        sr = reaches(subject, recs, chain, options)
         for rec, a, b, why in sr.skipped:
             skipped.setdefault(rec, []).append((a, b, why))
         if len(sr) == 0:
@@ -175,7 +185,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
         base["joint_minjerk_oracle"]["status"].append(np.zeros(len(sr), int))
     if not rows["status"]:
         raise ValueError("no reach of `recordings` could be predicted: " + "; ".join(
-            list(problems.values()) + [f"{r}: {len(v)} stretches skipped" for r, v in skipped.items()]))
+            list(problems.values()) + [skipped_summary([(r, *w) for w in v]) for r, v in skipped.items()]))
     cat = {k: np.concatenate(v) for k, v in rows.items()}
     rmse, final = _errors(cat["q_pred"], cat["q_obs"], cat["status"])
     baselines = {}

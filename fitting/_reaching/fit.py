@@ -44,9 +44,14 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 
 from .._ik import estimate_ik_weights, overspecified_joints
-from .._movements import fit as mfit
-from .._movements import model as mcfg
-from .._movements.data import SubjectReaches
+from .._movements import (
+    SubjectReaches,
+    bound_residual,
+    fit_subjects,
+    free_index,
+    n_params,
+    reach_jackknife_covariance,
+)
 from .._optimise import lm_iterations
 from .model import (
     _ELBOW,
@@ -95,14 +100,14 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
     delete-one-motion jackknife covariance after stage 2 (the Gauss–Newton one of stage 1 for a
     Donders-fitted model) and the residual with the four bounds of ``_bound_residual`` last."""
     gcfg = _generic_config(cfg)
-    S, P = len(motions), mcfg.n_params(gcfg)
-    free = np.array(mcfg.free_index(gcfg, P))
+    S, P = len(motions), n_params(gcfg)
+    free = np.array(free_index(gcfg, P))
     elbow = np.array([m.q_obs[:, -1, 3].mean() for m in motions])
     if theta0 is not None:
         theta0 = np.insert(np.asarray(theta0, float).reshape(S, P - 1), _ELBOW, elbow, axis=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (fit_reaching warns itself, naming its step option)
-        g = mfit._fit(_chain(), [_as_reaches(m) for m in motions], gcfg, max_steps, REST_MARGIN_DEG,
+        g = fit_subjects(_chain(), [_as_reaches(m) for m in motions], gcfg, max_steps, REST_MARGIN_DEG,
                       theta0=theta0, steps=steps, solver=solver, identify=False, name="fit_reaching")
     weight, B = g["weight"], g["B"]
     bounds = B * SAMPLES * 4 + np.array([0, 1, 2, 3])  # (cond(KJ), the shoulder rest angles; not the elbow's)
@@ -136,7 +141,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
         residual, jac = np.asarray(g["residual"])[:, keep], np.asarray(g["jac"])[:, keep]
         # The delete-one-motion jackknife (errors shared by a motion's samples: its start posture,
         # its target, misfit); padding and left-out motions (weight 0) are in no group.
-        cov = np.stack([mfit._reach_jackknife_covariance(g["jac"][i], g["residual"][i], gcfg, weight[i])
+        cov = np.stack([reach_jackknife_covariance(g["jac"][i], g["residual"][i], gcfg, weight[i])
                         for i in range(S)])
         out.update(residual=residual, cov=cov, n_residuals=np.array(used) * SAMPLES * 4, stage=2)
         if keep_jac:
@@ -467,7 +472,7 @@ def _bound_pull_se(theta, residual, cov, cost, n_res, lo, hi, cfg, elbow) -> np.
     gcfg = _generic_config(cfg)
     bounds = {"lo": np.r_[lo, -np.inf], "hi": np.r_[hi, np.inf], "log_cond_max": math.log(cfg.cond_max)}
     full = lambda z: jnp.insert(z, _ELBOW, elbow)  # noqa: E731
-    Jb = np.asarray(jax.jacfwd(lambda z: mcfg.bound_residual(full(z), bounds, gcfg)[:4])(jnp.asarray(theta)))[:, use]
+    Jb = np.asarray(jax.jacfwd(lambda z: bound_residual(full(z), bounds, gcfg)[:4])(jnp.asarray(theta)))[:, use]
     rb = np.asarray(residual)[-4:]
     sigma2 = 2.0 * cost / (n_res - use.sum())
     H = sigma2 * np.linalg.pinv(cov[np.ix_(use, use)]) - Jb.T @ Jb

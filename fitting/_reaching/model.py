@@ -46,7 +46,9 @@ import numpy as np
 import pmpjax as pj
 from pmpjax.internal import fast_compile_jit, row_chunks
 
-from .._movements import model as mcfg
+from .._movements import BOUND_WIDTH as _BOUND_WIDTH
+from .._movements import GAIN_CAP as _GAIN_CAP
+from .._movements import ReachModelConfig, stage2_start, unpack_params
 from .._optimise import sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
@@ -64,8 +66,8 @@ REST_MARGIN_DEG = 20.0
 #: Softplus widths of the bounds (``fitting._movements.model.BOUND_WIDTH``): a bound counts as
 #: binding (``bound_active``) within three widths of it or beyond, or where its penalty moves the
 #: estimate by more than 0.1 standard errors (``fit._bound_pull_se``).
-BOUND_WIDTH = mcfg.BOUND_WIDTH
-GAIN_CAP = mcfg.GAIN_CAP  # 1/T_rec: cap of the time-base generator's task-velocity gain
+BOUND_WIDTH = _BOUND_WIDTH
+GAIN_CAP = _GAIN_CAP  # 1/T_rec: cap of the time-base generator's task-velocity gain
 MODELS = ("lambda0", "lambda0_minjerk")
 DAMPINGS = ("tau0_KJ", "diagonal", "full")
 TIME_CONSTANTS = ("tied", "fitted")
@@ -99,11 +101,11 @@ def _param_names(cfg: _Config) -> tuple[str, ...]:
     return names
 
 
-def _generic_config(cfg: _Config) -> mcfg.Config:
+def _generic_config(cfg: _Config) -> ReachModelConfig:
     """The model of ``cfg`` as ``fit_movements``' (this module's HuG-MP case): 4 joints, segmented
     motions (no delay, no per-reach offsets), fractions of T (or tied), the elbow's rest angle held
     (the gauge of the module docstring)."""
-    return mcfg.Config(4, cfg.model, cfg.damping, "fractions" if cfg.time_constants == "fitted" else "tied",
+    return ReachModelConfig(4, cfg.model, cfg.damping, "fractions" if cfg.time_constants == "fitted" else "tied",
                        m=0, delay=False, hold=(_ELBOW,), cond_max=cfg.cond_max, ftol=cfg.ftol, xtol=cfg.xtol,
                        stol=cfg.stol)
 
@@ -113,7 +115,7 @@ def _unpack(theta, cfg: _Config, elbow) -> dict:
     (4, 4) per unit τ0 (trace 4), ``tau``, ``tau0`` (fractions of T), ``duration`` (of T_rec):
     ``fit_movements``' model (``fitting._movements.model.unpack``) with the elbow's rest angle
     inserted."""
-    p = mcfg.unpack(jnp.insert(theta, _ELBOW, jnp.asarray(elbow, theta.dtype)), _generic_config(cfg))
+    p = unpack_params(jnp.insert(theta, _ELBOW, jnp.asarray(elbow, theta.dtype)), _generic_config(cfg))
     nan = jnp.full((), jnp.nan, theta.dtype)
     out = dict(KJ=p["KJ"], q_rest=p["q_rest"], W=p["W"], tau0=p["a0"] * jnp.ones((), theta.dtype))
     if cfg.model == "lambda0":
@@ -127,7 +129,7 @@ def _stage2_start(theta1, cfg: _Config):
     """Stage-2 start from the stage-1 parameters (``KJ``, the shoulder rest angles):
     ``fit_movements``' (free ``W̃`` at ``KJ`` (``"full"``) or ``diag KJ`` (``"diagonal"``), time
     constants at their tied values)."""
-    th = mcfg.stage2_start(jnp.insert(theta1, _ELBOW, 0.0), _generic_config(cfg))
+    th = stage2_start(jnp.insert(theta1, _ELBOW, 0.0), _generic_config(cfg))
     return jax.lax.stop_gradient(jnp.delete(th, _ELBOW, assume_unique_indices=True))
 
 
