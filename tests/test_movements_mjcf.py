@@ -22,6 +22,7 @@ import pytest
 from _movement_reference import continuous_recording, mjcf_fk_jac_fn, random_spd
 from _reference import slsqp_equilibrium
 
+import fitting._movements
 import pmpjax as pj
 from fitting._movements.data import subject_reaches
 
@@ -61,10 +62,18 @@ def case(tmp_path_factory):
     out = folder / "out"
     from pmpjax._app.cli import main
 
-    code = main(["fit-movements", "--chain", str(ARM5), "--site", "hand", str(paths[0]),
-                 "--holdout", str(paths[1]), "--out", str(out)])
+    made = {}  # the command's fit and prediction, kept for the exit-status test
+
+    def keep(name, fn):
+        return lambda *a, **k: made.setdefault(name, fn(*a, **k))
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(fitting._movements, "fit_movements", keep("fit", fitting._movements.fit_movements))
+        mp.setattr(fitting._movements, "predict_movements", keep("pred", fitting._movements.predict_movements))
+        code = main(["fit-movements", "--chain", str(ARM5), "--site", "hand", str(paths[0]),
+                     "--holdout", str(paths[1]), "--out", str(out)])
     return dict(KJ=KJ, fk=fk, jac=jac, chain=chain, paths=paths, info=infos[1], train_info=infos[0], out=out,
-                code=code)
+                code=code, **made)
 
 
 def rows(path):
@@ -142,3 +151,20 @@ def test_command_refuses_bad_input_before_any_fit(case, tmp_path, capsys):
         assert main(["fit-movements", *args, "--out", str(tmp_path / "out")]) == 2, args
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, (args, err)
+
+
+def test_a_held_out_reach_that_fails_makes_the_exit_status_1(case, tmp_path, monkeypatch, capsys):
+    # The documented policy: done and written, but a movement did not end successfully -> 1. The
+    # command's own fit and prediction again, with one held-out reach's simulation failed.
+    import dataclasses
+
+    from pmpjax._app.cli import main
+
+    status = np.asarray(case["pred"].status).copy()
+    status[0] = int(pj.Status.SINGULAR)
+    failed = dataclasses.replace(case["pred"], status=status)
+    monkeypatch.setattr(fitting._movements, "fit_movements", lambda *a, **k: case["fit"])
+    monkeypatch.setattr(fitting._movements, "predict_movements", lambda *a, **k: failed)
+    assert main(["fit-movements", "--chain", str(ARM5), "--site", "hand", str(case["paths"][0]), "--holdout",
+                 str(case["paths"][1]), "--out", str(tmp_path / "out"), "--no-figures"]) == 1
+    assert "1 held-out reach did not simulate successfully" in capsys.readouterr().out

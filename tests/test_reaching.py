@@ -490,6 +490,20 @@ def test_predict_reaching_rows_and_baselines(folders, clean_fit, tmp_path):
 
 
 @pytest.mark.bad_input("fitting.fit_reaching", "fitting.predict_reaching", "pj.ShoulderElbowArm")
+def test_predictions_take_fitted_fractions_of_the_duration_not_seconds(clean_fit):
+    # A fitted τ/T of 5 is a time constant of 2.5–4 on normalised time; predict_reaching builds
+    # its planners there, so the unit hint for seconds (τ over 2 s: "milliseconds?") must not fire.
+    import dataclasses
+
+    params = clean_fit.params.copy()
+    params[0, clean_fit.param_names.index("log(tau/T)")] = np.log(5.0)
+    slow = dataclasses.replace(clean_fit, params=params, tau_over_T=np.array([5.0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        pr = fitting.predict_reaching(slow, reps=(8,))
+    assert len(pr.task) > 0 and np.all(pr.status == 0)
+
+
 def test_bad_input(folders, clean_fit):
     bad = folders["bad"]
     cases = [

@@ -21,7 +21,7 @@ import numpy as np
 
 import pmpjax as pj
 from pmpjax import Status, status_message
-from pmpjax.internal import pad_rows
+from pmpjax.internal import pad_rows, without_unit_checks
 
 from .fit import ReachingFit
 from .model import (
@@ -278,7 +278,8 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     # the fitted model, one parameter set per row, and the unfitted λ0-PMP (KJ = I, q_rest = mean
     # posture, τ = τ0 = T/5): one batch when they share the planner, so one compilation
     p = _unpack_host(fit.params[own], cfg, fit.q_rest[own, 3])
-    model, planner, _, _ = _model_and_planner(p, t_ratio, cfg)
+    with without_unit_checks():  # (normalised time: fitted fractions of T, not seconds)
+        model, planner, _, _ = _model_and_planner(p, t_ratio, cfg)
     eye = np.broadcast_to(np.eye(4), (Bp, 4, 4))
     tau0_u = 0.2 * t_ratio
     model_u = pj.Lambda0PMP(chain, KJ=eye, q_rest=fit.mean_posture[own], W=tau0_u[:, None, None] * eye)
