@@ -195,7 +195,10 @@ def test_recorded_hand_positions_cluster_per_board_target():
 
 @pytest.fixture(scope="module")
 def synthetic_fit(synthetic):
-    return rfit._fit_motions([synthetic], CFG, max_steps=(40, 40))
+    # (at 8 RODAS4 steps per sample from the start: the count the step refinement reaches on these
+    # stiff movements, 2 -> 4 -> 8, each a compile of stage 2; the refinement itself is checked
+    # with stand-in stages in tests/test_movements_steps.py)
+    return rfit._fit_motions([synthetic], CFG, max_steps=(40, 40), steps=8)
 
 
 def test_synthetic_movements_have_ended(synthetic):

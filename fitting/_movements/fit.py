@@ -438,13 +438,15 @@ def fit_movements(
 
 def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg: float = mdl.REST_MARGIN_DEG, *,
          theta0=None, steps: int | None = None, solver: str | None = None, identify: bool = True,
-         name: str = "fit_movements") -> dict:
+         name: str = "fit_movements", stage1: dict | None = None, first_steps: int | None = None) -> dict:
     """Fit every subject (stage 1, then stage 2 with the step refinement of the module docstring).
 
     ``theta0`` (S, p): skip stage 1 and start stage 2 there (``ms[1] = 0``: the residual and
     Jacobian at ``theta0``); ``steps``/``solver``: fixed instead of RODAS4 refined from
     ``STEPS_PER_SAMPLE``; ``identify``: the identifiability analysis of a Donders-fitted model
-    (``ms[1] = 0``); ``name`` in warnings. Returns a dict of NumPy arrays (the fitted parameters
+    (``ms[1] = 0``); ``name`` in warnings; ``stage1``: the ``"stage1"`` of an earlier call, whose
+    stage 2 this one runs; ``first_steps``: the step count the refinement starts from.
+    Returns a dict of NumPy arrays (the fitted parameters
     are the full ``p``, held ones included; ``jac`` has the fitted ones' columns)."""
     data = _stack(subjects, chain, margin_deg=margin_deg)
     data["log_cond_max"] = np.full(len(subjects), math.log(cfg.cond_max))
@@ -452,11 +454,15 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     S = len(subjects)
     k = spd_size(cfg.n)
     fixed_steps = steps is not None
-    solver, steps = solver or "rodas4", int(steps or STEPS_PER_SAMPLE)
+    solver, steps = solver or "rodas4", int(steps or first_steps or STEPS_PER_SAMPLE)
     B = data["weight"].shape[1]
     out = dict(stage1=None, solver=solver, B=B)
     used0 = data["weight"] > 0
-    if theta0 is None:
+    if stage1 is not None:
+        out["stage1"] = stage1
+        data["weight"] = stage1["weight"]
+        theta0 = stage1["start"]
+    elif theta0 is None:
         th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
         s1 = {key: np.asarray(v) for key, v in jax.device_get(
             _stage1(th1, data, chain, np.int32(ms[0]), cfg=jcfg)).items()}
