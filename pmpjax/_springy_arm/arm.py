@@ -143,7 +143,12 @@ def load_arm(xml_or_model=None, *, contacts: bool = True) -> CogArm:
         raise TypeError(f"`contacts` must be a bool, got {type(contacts).__name__}")
     if xml_or_model is None:
         return _load_default(contacts)
-    spec, m = load_spec(xml_or_model)
+    try:
+        spec, m = load_spec(xml_or_model)
+    except ValueError as e:  # (a file's error starts with its path: name the argument too)
+        if str(e).startswith("`xml_or_model`"):
+            raise
+        raise type(e)(f"`xml_or_model`: {e}") from e
     return _load(spec, m if spec is not None else _copy_model(m), contacts)
 
 
