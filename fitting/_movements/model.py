@@ -269,6 +269,26 @@ def nuisance_scale(data, cfg: Config):
     return jnp.concatenate(cols, axis=1)
 
 
+def rk4_rates(chain, KJ, W, tau0, q0, *, minjerk: bool):
+    """Fastest rate [1 / normalised time] of each reach at its start, as ``pmpjax.simulate``'s RK4
+    check: the task rate of Eq 10, ``cond(M)/τ0`` with ``M = J W⁻¹ Jᵀ`` (the time-base generator:
+    its gain cap), and the elastic rate ``λ_max(W⁻¹ KJ)``. ``W`` (B, n, n), ``KJ`` (n, n) or
+    (B, n, n), ``tau0`` (B,), ``q0`` (B, n)."""
+    J = chain.jacobian(q0)
+    C = jnp.linalg.cholesky(W)
+    CiJt = jax.scipy.linalg.solve_triangular(C, jnp.swapaxes(J, -1, -2), lower=True)  # C⁻¹ Jᵀ
+    lam = jnp.linalg.eigvalsh(jnp.swapaxes(CiJt, -1, -2) @ CiJt)  # eig(J W⁻¹ Jᵀ)
+    task = jnp.full(tau0.shape, GAIN_CAP) if minjerk else lam[..., -1] / lam[..., 0] / tau0
+    X = jax.scipy.linalg.solve_triangular(C, jnp.broadcast_to(KJ, W.shape), lower=True)
+    S = jax.scipy.linalg.solve_triangular(C, jnp.swapaxes(X, -1, -2), lower=True)  # C⁻¹ KJ C⁻ᵀ
+    return jnp.maximum(task, jnp.linalg.eigvalsh(0.5 * (S + jnp.swapaxes(S, -1, -2)))[..., -1])
+
+
+#: RK4 trial parameters whose fastest rate times the step exceeds this (of RK4's 2.78) give NaN
+#: residuals: Levenberg–Marquardt rejects them instead of fitting an unstable integration.
+RK4_STABLE = 2.5
+
+
 def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str):
     """Stage 2: per reach ``(q_sim − q_obs)(s_k) √(w/(S−1))``, k = 1..S−1, and the final posture
     once more (``FINAL_WEIGHT``) (B·(S·n),) [rad], then the bounds (1 + n), then the per-reach
@@ -286,7 +306,13 @@ def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str
                          d[:, -1] * (FINAL_WEIGHT * sw)[:, None]], axis=1)
     used = weight > 0
     r = jnp.where(used[:, None], r, 0.0)
-    good = (traj.status == int(pj.Status.SUCCESSFUL)) | (traj.status == int(pj.Status.INACCURATE)) | ~used
+    good = (traj.status == int(pj.Status.SUCCESSFUL)) | (traj.status == int(pj.Status.INACCURATE))
+    if solver == "rk4":
+        W = jax.lax.stop_gradient(model.W)
+        rate = rk4_rates(chain, jax.lax.stop_gradient(p["KJ"]), W, jnp.trace(W, axis1=-2, axis2=-1) / cfg.n,
+                         data["q_start"], minjerk=cfg.model != "lambda0")
+        good &= rate / ((SAMPLES - 1) * steps) <= RK4_STABLE
+    good |= ~used
     parts = [jnp.where(good[:, None], r, jnp.nan).reshape(-1), bound_residual(theta, data, cfg)]
     if theta.shape[0] > n_params(cfg):
         u = theta[n_params(cfg):].reshape(-1, n_nuisance(cfg))

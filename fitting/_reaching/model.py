@@ -48,7 +48,7 @@ from pmpjax.internal import fast_compile_jit, row_chunks
 
 from .._movements import BOUND_WIDTH as _BOUND_WIDTH
 from .._movements import GAIN_CAP as _GAIN_CAP
-from .._movements import ReachModelConfig, stage2_start, unpack_params
+from .._movements import ReachModelConfig, rk4_rates, stage2_start, unpack_params
 from .._optimise import sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
@@ -154,18 +154,9 @@ def _model_and_planner(p: dict, t_ratio, cfg: _Config):
 
 
 def _rates(KJ, W, tau0, q0, *, minjerk: bool):
-    """Fastest rate [1 / normalised time] of each motion at its start, as ``pmpjax.simulate``'s
-    RK4 check: the task rate of Eq 10, ``cond(M)/τ0`` with ``M = J W⁻¹ Jᵀ`` (the time-base
-    generator: its gain cap), and the elastic rate ``λ_max(W⁻¹ KJ)``. ``W`` (B, 4, 4), ``KJ``
-    (4, 4) or (B, 4, 4), ``tau0`` (B,), ``q0`` (B, 4)."""
-    J = _chain().jacobian(q0)
-    C = jnp.linalg.cholesky(W)
-    CiJt = jax.scipy.linalg.solve_triangular(C, jnp.swapaxes(J, -1, -2), lower=True)  # C⁻¹ Jᵀ
-    lam = jnp.linalg.eigvalsh(jnp.swapaxes(CiJt, -1, -2) @ CiJt)  # eig(J W⁻¹ Jᵀ)
-    task = jnp.full(tau0.shape, GAIN_CAP) if minjerk else lam[..., -1] / lam[..., 0] / tau0
-    X = jax.scipy.linalg.solve_triangular(C, jnp.broadcast_to(KJ, W.shape), lower=True)
-    S = jax.scipy.linalg.solve_triangular(C, jnp.swapaxes(X, -1, -2), lower=True)  # C⁻¹ KJ C⁻ᵀ
-    return jnp.maximum(task, jnp.linalg.eigvalsh(0.5 * (S + jnp.swapaxes(S, -1, -2)))[..., -1])
+    """``fitting._movements``' ``rk4_rates`` on the arm: the fastest rate [1 / normalised time] of
+    each motion at its start. ``W`` (B, 4, 4), ``KJ`` (4, 4) or (B, 4, 4), ``tau0`` (B,), ``q0`` (B, 4)."""
+    return rk4_rates(_chain(), KJ, W, tau0, q0, minjerk=minjerk)
 
 
 _rates_jit = fast_compile_jit(_rates, static_argnames=("minjerk",))
