@@ -85,9 +85,12 @@ Fit cost (2026-12-06 06:00–06:06 UTC, ``results/reaching.json``; load average 
     machine's other work far more than the SciPy loop's (S01 alone 11.6–17.3 s over the three
     rounds, a residual call 0.63–0.66 s).
 
-Held-out table (2026-12-05 16:31–16:58 UTC, ``--table --max-steps 100 200``; 27 min for 12
-variants + the Donders-only model; ``results/reaching_table.md``): every fit of every variant
-converged on all four subjects. Pooled median held-out RMSE [deg]: Donders-only 15.1; Arimoto planner tied
+Held-out table (2026-12-06, ``--table --max-steps 100 200``, on ``fit_movements``' engine: the
+Arimoto variants and the Donders-only model 10:21–11:21 UTC, the time-base generator's 11:57–12:12
+UTC, under other load; ``results/reaching_table.md``): every pooled median held-out RMSE within
+0.00015° of the table of the earlier, separate ``fit_reaching`` implementation (2026-12-05), and
+every fit of every variant converged on all four subjects. Pooled median held-out RMSE [deg]:
+Donders-only 15.1; Arimoto planner tied
 (``tau0_KJ``/diagonal/full) 8.9/13.2/8.5, fitted 5.9/7.1/5.6; time-base generator tied 5.6/5.6/5.6,
 fitted 5.3/5.3/5.3; pinv_minjerk 7.5, ik_weights_minjerk 9.9, unfitted λ0-PMP 13.6, joint-space
 oracle 5.6. Verdict: the fitted-time-constant Arimoto variants and every time-base-generator
