@@ -139,9 +139,7 @@ def segmented_reaches(subject: str, recordings: Sequence, chain, options: dict) 
     ``smoothing`` (``pmpjax.smooth_path``'s λ; None: GCV per motion; default
     ``SEGMENTED_SMOOTHING``). Recordings whose speed never falls below the level on one side
     (cut by the recording), or with fewer than 5 samples, are skipped with the reason."""
-    unknown = sorted(set(options) - {"onset", "smoothing"})
-    if unknown:
-        raise ValueError(f"`find_options` of segmented recordings takes 'onset' and 'smoothing'; got {unknown}")
+    options = check_find_options(options, True)
     level = float(options.get("onset", SEGMENTED_ONSET))
     lam = options.get("smoothing", SEGMENTED_SMOOTHING)
     if not 0.0 < level < 1.0:
