@@ -10,7 +10,7 @@ from its dense output on one clock.
 from __future__ import annotations
 
 import numpy as np
-from _reference import arimoto, planar_fk, planar_jac, pmp_field
+from _reference import arimoto, minjerk_gain, planar_fk, planar_jac, pmp_field
 from scipy.integrate import solve_ivp
 
 RTOL, ATOL = 1e-9, 1e-11
@@ -74,7 +74,7 @@ def null_space(J, tol=1e-12):
 
 
 def continuous_recording(fk_jac, KJ, q_rest, tau0, tau, q_start, targets, hold, *, fs=100.0, noise_deg=0.0,
-                         seed=0, t0=0.0, lead=0.0, W=None):
+                         seed=0, t0=0.0, lead=0.0, W=None, minjerk=None):
     """One continuous λ0-PMP trial of reaches to ``targets`` (M, m), sampled at ``fs`` [Hz].
 
     The hand rests at ``q_start`` (n,) [rad] from ``t0`` (with no target: the λ0-PMP field with
@@ -82,7 +82,10 @@ def continuous_recording(fk_jac, KJ, q_rest, tau0, tau, q_start, targets, hold, 
     k appears at ``t_k = t0 + lead + Σ_{j<k} hold_j`` (``hold`` [s] a scalar or one per target).
     At each switch the Arimoto time restarts at 0 (``t − t_k``), Eq 10's ``k`` is recomputed at
     the current posture, and integration continues from the current state. ``W = τ0 KJ`` (Eq 7)
-    unless given. Samples at ``t0 + i/fs`` up to the end of the last reach (included when it lies
+    unless given. ``minjerk = (T, cap)`` [s, 1/s] replaces Arimoto's gain by the minimum-jerk
+    time-base generator ``F = γ(t − t_k) (J W⁻¹ Jᵀ)⁻¹ (x_d − x)`` with ``γ`` of
+    :func:`_reference.minjerk_gain` (``tau`` unused; ``gains`` then holds ``cap``).
+    Samples at ``t0 + i/fs`` up to the end of the last reach (included when it lies
     on the clock); Gaussian noise of ``noise_deg`` [deg] (seeded) is added to the joints.
 
     Returns ``(t (T,), q (T, n) [rad, noisy], info)``; ``info``: ``q`` (T, n) noise-free, ``x``
@@ -123,13 +126,21 @@ def continuous_recording(fk_jac, KJ, q_rest, tau0, tau, q_start, targets, hold, 
     gains, q_final = np.empty(M), np.empty((M, q.size))
     for k in range(M):
         a, b = t_switch[k], ends[k]
-        gains[k] = eq10_gain(fk_jac, q, W, tau0)
-        K = arimoto(gains[k], tau)
         target = targets[k]
+        if minjerk is None:
+            gains[k] = eq10_gain(fk_jac, q, W, tau0)
+            K = arimoto(gains[k], tau)
 
-        def field(s, y, a=a, K=K, target=target):
-            F = K(s - a) * (target - fk_jac(y)[0])
-            return pmp_field(y, F, fk_jac, KJ, q_rest, W, "lambda0")
+            def field(s, y, a=a, K=K, target=target):
+                F = K(s - a) * (target - fk_jac(y)[0])
+                return pmp_field(y, F, fk_jac, KJ, q_rest, W, "lambda0")
+        else:
+            gains[k] = minjerk[1]
+
+            def field(s, y, a=a, target=target):
+                x, J = fk_jac(y)
+                F = minjerk_gain(s - a, *minjerk) * np.linalg.solve(J @ np.linalg.solve(W, J.T), target - x)
+                return pmp_field(y, F, fk_jac, KJ, q_rest, W, "lambda0")
 
         sol = integrate(q, (a, b), field)
         fill(sol, a, b, k == M - 1)

@@ -1,5 +1,5 @@
 """The time-base generator's gain ``γ = ξ̇/(1 − ξ)`` (``MinimumJerkPlanner``) and the derivatives of
-simulations with respect to its ``duration`` and ``gain_cap``.
+simulations with respect to its ``duration``, ``gain_cap`` and ``delay``.
 
 References, independent of pmpjax: the definition ``ξ̇/(1 − ξ)`` of ``ξ(s) = 10 s³ − 15 s⁴ + 6 s⁵``
 in exact rational arithmetic (``fractions.Fraction``; its derivatives by exact central differences
@@ -104,6 +104,19 @@ def test_gain_is_elementwise_over_batches():
                                     for Ti, ci in zip(T, cap)], rtol=1e-12)
 
 
+def test_delay_shifts_the_move_and_holds_the_hand_before_it():
+    # delay > 0: the move began before t = 0; delay < 0: gain 0 until t = −delay, then the move
+    T, cap = 0.4, 200.0
+    t = np.array([0.0, 0.03, 0.1, 0.25, 0.39, 0.5])
+    for delay in (0.06, -0.06):
+        g = np.asarray(pj.MinimumJerkPlanner(duration=T, gain_cap=cap, delay=delay).gain(jnp.asarray(t)))
+        ref = [0.0 if ti + delay <= 0 else cap if ti + delay >= T else min(gamma_at(ti + delay, T), cap) for ti in t]
+        np.testing.assert_allclose(g, ref, rtol=1e-12, atol=0)
+    assert np.sum(np.asarray(ref) == 0.0) == 2  # (delay −0.06: held at t = 0 and 0.03)
+    with pytest.raises(ValueError, match="delay"):
+        pj.MinimumJerkPlanner(duration=T, delay=float("nan"))
+
+
 def test_gain_derivatives_are_exact_and_finite_at_and_after_the_end():
     """∂γ/∂t, ∂γ/∂T, ∂γ/∂cap by reverse and forward mode against exact central differences of
     the definition (uncapped), 0, 0, 1 where capped; finite (no NaN/inf from the untaken branch)
@@ -142,19 +155,21 @@ Q0 = np.zeros(3)
 X_D = np.array([0.15, 0.2])
 WEIGHTS = np.array([1.0, -2.0, 0.5])
 T, CAP = 0.4, 40.0  # the cap is reached at s ≈ 0.83: the last 70 ms approach the target at 40 /s
+DELAY = -0.05  # the move begins at t = 0.05 s and ends at T − DELAY = 0.45 s
 RADAU = dict(method="Radau", rtol=1e-10, atol=1e-12)
 
 
-SAMPLES = (0.1, 0.2, 0.3, 0.4, 0.5)
+SAMPLES = (0.1, 0.2, 0.3, 0.4, T - DELAY, 0.5)  # (T − DELAY: the end of the move)
 
 
 def radau_scalars(p):
-    """``WEIGHTS · q(t)`` at ``SAMPLES`` of the λ0-PMP under ``F = γ B (x_d − x)`` by Radau, ``p = (T, cap)``."""
+    """``WEIGHTS · q(t)`` at ``SAMPLES`` of the λ0-PMP under ``F = γ(t + delay) B (x_d − x)`` by Radau,
+    ``p = (T, cap, delay)``."""
     A = np.linalg.inv(W)
 
     def rhs(t, q):
         x, J = wrist_fk(q), wrist_jac(q)
-        F = minjerk_gain(t, p[0], p[1]) * np.linalg.solve(J @ A @ J.T, X_D - x)  # γ B (x_d − x)
+        F = minjerk_gain(t + p[2], p[0], p[1]) * np.linalg.solve(J @ A @ J.T, X_D - x)  # γ B (x_d − x)
         return pmp_field(q, F, lambda _: (x, J), KJ, Q_REST, W, "lambda0")
 
     sol = solve_ivp(rhs, (0.0, SAMPLES[-1]), Q0, t_eval=SAMPLES, **RADAU)
@@ -164,11 +179,12 @@ def radau_scalars(p):
 
 @pytest.fixture(scope="module")
 def radau():
-    """Central differences (steps 1e-5 relative) of :func:`radau_scalars`: ``{t: (∂/∂(T, cap), value)}``."""
-    p = np.array([T, CAP])
+    """Central differences (steps 1e-5 relative) of :func:`radau_scalars`:
+    ``{t: (∂/∂(T, cap, delay), value)}``."""
+    p = np.array([T, CAP, DELAY])
     cols, mid = [], 0.0
-    for i in range(2):
-        e = np.zeros(2)
+    for i in range(3):
+        e = np.zeros(3)
         e[i] = 1e-5 * p[i]
         hi, lo = radau_scalars(p + e), radau_scalars(p - e)
         cols.append((hi - lo) / (2 * e[i]))
@@ -178,12 +194,12 @@ def radau():
 
 
 def simulation(duration, dt, saveat, solver):
-    """``p = (T, cap) -> (∂/∂p, value)`` of ``WEIGHTS · q`` at the saved times, one compilation."""
+    """``p = (T, cap, delay) -> (∂/∂p, value)`` of ``WEIGHTS · q`` at the saved times, one compilation."""
     model = pj.Lambda0PMP(pj.Wrist(), KJ=KJ, q_rest=Q_REST, W=W)
 
     def scalars(p):
-        tr = pj.simulate(model, pj.MinimumJerkPlanner(duration=p[0], gain_cap=p[1]), Q0, X_D, duration=duration,
-                         dt=dt, saveat=saveat, solver=solver)
+        planner = pj.MinimumJerkPlanner(duration=p[0], gain_cap=p[1], delay=p[2])
+        tr = pj.simulate(model, planner, Q0, X_D, duration=duration, dt=dt, saveat=saveat, solver=solver)
         v = tr.q @ jnp.asarray(WEIGHTS)
         return v, v
 
@@ -193,29 +209,32 @@ def simulation(duration, dt, saveat, solver):
 @pytest.mark.parametrize(
     "duration, n_steps, saveat, solver",
     [
-        # duration = T: the last step's stages at its end land, rounded, at T (1 − 1e-16)
-        (T, 252, pj.SaveAt(final=True), "rodas4"),
+        # duration = the move's end: the last step's stages at its end land, rounded, there
+        (T - DELAY, 284, pj.SaveAt(final=True), "rodas4"),
         # past T: samples before the cap is reached, after it, at T and after T
         (SAMPLES[-1], 200, pj.SaveAt(ts=SAMPLES), "rk4"),
     ],
 )
-def test_simulation_derivatives_by_duration_and_gain_cap(radau, duration, n_steps, saveat, solver):
+def test_simulation_derivatives_by_duration_gain_cap_and_delay(radau, duration, n_steps, saveat, solver):
     ts = (duration,) if saveat.final else saveat.ts
     jac = simulation(duration, duration / n_steps, saveat, solver)
-    p = jnp.array([T, CAP])
+    p = jnp.array([T, CAP, DELAY])
     D, val = (np.asarray(a) for a in jac(p))
     ref_D, ref_val = (np.stack(a) for a in zip(*(radau[t] for t in ts)))
     assert np.abs(val - ref_val).max() < 1e-6
-    # the requirement: within 1 % of the true derivative (Radau's), both parameters; before the cap
+    # the requirement: within 1 % of the true derivative (Radau's), every parameter; before the cap
     # is reached (s < 0.83) the state does not depend on the cap at all
-    capped = np.asarray(ts) > 0.83 * T
+    capped = np.asarray(ts) + DELAY > 0.83 * T
+    assert 0 < capped.sum() < len(ts) or saveat.final
     np.testing.assert_allclose(D[:, 0], ref_D[:, 0], rtol=1e-2, atol=0)
+    np.testing.assert_allclose(D[:, 2], ref_D[:, 2], rtol=1e-2, atol=0)
     np.testing.assert_allclose(D[capped, 1], ref_D[capped, 1], rtol=1e-2, atol=0)
     assert np.all(D[~capped, 1] == 0.0) and np.all(np.abs(ref_D[~capped, 1]) < 1e-7)
     assert np.abs(ref_D[:, 0]).min() > 1e-2 and np.abs(ref_D[capped, 1]).min() > 1e-5  # not negligible
+    assert np.abs(ref_D[:, 2]).min() > 1e-2
     # the discrete solution is differentiated exactly: central differences of the simulation itself
     # (steps 1e-7 relative, inside the old gain's collapse; round-off ~1e-9 of the derivatives)
-    for i in range(2):
-        h = 1e-7 * float(p[i])
+    for i in range(3):
+        h = 1e-7 * abs(float(p[i]))
         fd = (np.asarray(jac(p.at[i].add(h))[1]) - np.asarray(jac(p.at[i].add(-h))[1])) / (2 * h)
         np.testing.assert_allclose(D[:, i], fd, rtol=1e-6, atol=0)

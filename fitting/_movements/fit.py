@@ -16,7 +16,9 @@ turn of the recorded range): their values are a gauge, not an estimate, reported
 optimum was measured to bias τ by 13–30 % on the shoulder–elbow arm: the directions turn with
 ``KJ``.) Stage 2 fits every parameter, and each reach's delay and target offsets (nuisance
 parameters with weak priors, ``fitting._movements.model``; profiled out of the identifiability
-analysis), to the joint trajectories through ``pmpjax.simulate`` (RODAS4, forward-mode
+analysis), to the joint trajectories through ``pmpjax.simulate`` (RODAS4; for the time-base
+generator RK4 from the fewest steps stable at the start, ``_rk4_start_steps``, and on continuous
+recordings a start at ``KJ = I`` with the recorded move timing, ``_minjerk_start``; forward-mode
 derivatives, the nuisance columns ``k`` JVPs for all reaches together); the
 integration error at the optimum (against twice the steps) is checked and the step count doubled
 while it exceeds ``INTEGRATION_TOL_DEG``. Converged means Levenberg–Marquardt met a tolerance
@@ -69,6 +71,8 @@ IDENTIFIABILITY_RCOND = 1e-6
 INTEGRATION_TOL_DEG = 0.01
 STEPS_PER_SAMPLE = 2
 MAX_STEPS_PER_SAMPLE = 32
+#: RK4 (the time-base generator) may start at more steps than the refinement's RODAS4.
+MAX_RK4_STEPS_PER_SAMPLE = 160
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,8 +83,9 @@ class MovementFit:
     damping per unit τ0 (trace n; the damping of a reach is ``τ0 W``); ``tau``, ``tau0`` (S,) [s]
     (``time_constants="seconds"``) or fractions of each reach's duration (``"fractions"``; ``tau``
     NaN for the time-base generator, whose duration fraction is ``duration``; 0.2 when
-    ``"tied"``); ``delay`` (S,) how long before a reach's window the target appeared (Arimoto;
-    same unit; unseen reaches are predicted with it; NaN for segmented recordings) and ``reach_delays``
+    ``"tied"``); ``delay`` (S,) how long before a reach's window the target appeared (Arimoto)
+    or the generator's move began (negative: after; same unit; unseen reaches are predicted with
+    it; NaN for segmented recordings) and ``reach_delays``
     {subject: (B,)} each fitted reach's own (``delay`` plus
     its fitted offset, in the order of ``reaches[subject]``); ``reach_target_offsets`` {subject:
     (B, m)} each fitted reach's target minus the hand at the end of its window (the chain's task
@@ -238,6 +243,72 @@ def _held(fun, theta, cfg):
     free = jnp.asarray(mdl.free_index(cfg, theta.shape[0]))
     embed = lambda z: theta.at[free].set(z)  # noqa: E731
     return (lambda z, d: fun(embed(z), d)), theta[free], embed
+
+
+@partial(fast_compile_jit, static_argnames=("cfg",))
+def _start_rates(theta, data, chain, *, cfg):
+    """The fastest rate (S, B) [1 / normalised time] of each reach at its start posture
+    (``model.rk4_rates``) under the subjects' parameters ``theta`` (S, p); 0 for padding."""
+
+    def one(th, dat):
+        p = mdl.unpack(th, cfg)
+        _, tau0, W = mdl.reach_damping(p, dat["duration"], cfg, dat["t_ratio"])
+        rates = mdl.rk4_rates(chain, p["KJ"], W, tau0, dat["q_start"], minjerk=cfg.model != "lambda0")
+        return jnp.where(dat["weight"] > 0, rates, 0.0)
+
+    return jax.vmap(one)(theta, data)
+
+
+#: A minimum-jerk speed profile is at 20 % of its peak at these phases of its duration.
+_MINJERK_20 = ((1.0 - math.sqrt(1.0 - 4.0 * math.sqrt(0.2 / 16.0))) / 2.0,
+               (1.0 + math.sqrt(1.0 - 4.0 * math.sqrt(0.2 / 16.0))) / 2.0)
+
+
+def _minjerk_start(theta, data, chain, cfg):
+    """The time-base generator's stage-2 start (continuous recordings) from stage 1's (S, p):
+    ``KJ = I`` with stage 1's ``q_rest``, and the duration and delay from the recorded hand speeds
+    (per reach, the times where the speed first and last reaches 20 % of its peak are a
+    minimum-jerk move's phases ``_MINJERK_20``; the subject's medians).
+
+    Why not stage 1's ``KJ``: the generator puts the hand on its target at the end of its move, and
+    the null space then relaxes at ``1/τ0``, so final postures recorded before that ends pull the
+    Donders fit off; from there (and from the whole window without delay) Levenberg–Marquardt was
+    drawn to a quasi-static local optimum (τ0 → 7 ms, ten times the cost) on the 3-joint planar
+    reference, and from ``KJ = I`` it reached the optimum in 49 iterations."""
+    theta = np.array(theta, float)
+    k, n = spd_size(cfg.n), cfg.n
+    x = np.asarray(_fk(chain, data["q_obs"]))  # (S, B, SAMPLES, m)
+    frac = np.linspace(0.0, 1.0, SAMPLES)
+    speed = np.linalg.norm(np.diff(x, axis=2), axis=-1)  # per sample interval (mid-interval times)
+    mid = 0.5 * (frac[1:] + frac[:-1])
+    above = speed >= 0.2 * speed.max(axis=2, keepdims=True)
+    first = mid[np.argmax(above, axis=2)]
+    last = mid[above.shape[2] - 1 - np.argmax(above[..., ::-1], axis=2)]
+    d = (last - first) / (_MINJERK_20[1] - _MINJERK_20[0])  # (S, B) fractions of the window
+    begin = first - _MINJERK_20[0] * d
+    used = data["weight"] > 0
+    t0 = mdl.n_params(cfg) - mdl.n_timing(cfg)
+    for i in range(theta.shape[0]):
+        if not (np.any(used[i]) and np.all(np.isfinite(theta[i]))):
+            continue
+        th1 = np.concatenate([np.zeros(k), theta[i, k:k + n]])
+        theta[i] = np.asarray(mdl.stage2_start(jnp.asarray(th1), cfg))
+        win = data["duration"][i][used[i]] if cfg.time_constants == "seconds" else 1.0
+        if cfg.time_constants != "tied":
+            theta[i, t0] = math.log(max(float(np.median(d[i][used[i]] * win)), 1e-3))
+        theta[i, t0 + mdl.n_timing(cfg) - 1] = -float(np.median(begin[i][used[i]] * win))
+    return theta
+
+
+def _rk4_start_steps(theta, data, chain, cfg, minimum: int) -> int:
+    """RK4 steps per sample interval stable at the start of every reach of every subject under
+    ``theta`` (S, ≥p) (``model.stable_rk4_steps``, at least ``minimum``)."""
+    theta = np.asarray(theta, float)[:, : mdl.n_params(cfg)]
+    ok = np.all(np.isfinite(theta), axis=1)
+    if not np.any(ok):
+        return int(minimum)
+    rates = np.asarray(_start_rates(theta[ok], {k: v[ok] for k, v in data.items()}, chain, cfg=cfg))
+    return mdl.stable_rk4_steps(rates, minimum, MAX_RK4_STEPS_PER_SAMPLE)
 
 
 @partial(fast_compile_jit, static_argnames=("cfg",))
@@ -454,6 +525,10 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     S = len(subjects)
     k = spd_size(cfg.n)
     fixed_steps = steps is not None
+    # The time-base generator's gain rises to its cap as the move ends: Rosenbrock steps lose their
+    # order there (RODAS4 1.7° off at 32 steps per sample on HuG-MP's S01), RK4 does not. It runs
+    # RK4 from the fewest steps stable at the start parameters (``_rk4_start_steps``).
+    auto_rk4 = solver is None and steps is None and cfg.model == "lambda0_minjerk" and (ms[1] > 0 or identify)
     solver, steps = solver or "rodas4", int(steps or first_steps or STEPS_PER_SAMPLE)
     B = data["weight"].shape[1]
     out = dict(stage1=None, solver=solver, B=B)
@@ -472,6 +547,11 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     else:
         theta0 = np.asarray(theta0, float)
     out["weight"] = np.asarray(data["weight"])
+    if cfg.model == "lambda0_minjerk" and mdl.reach_delays(cfg) and theta0 is not None and out["stage1"] is not None:
+        theta0 = _minjerk_start(theta0, data, chain, cfg)
+    if auto_rk4:
+        solver, steps = "rk4", _rk4_start_steps(theta0, data, chain, jcfg, steps)
+        out["solver"] = solver
     out["dropped"] = [np.flatnonzero(used0[i, : len(s)] & ~(out["weight"][i, : len(s)] > 0))
                       for i, s in enumerate(subjects)]
     lm2 = np.zeros(S, int)
@@ -566,11 +646,11 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         KJ[a], W[a], q_rest[a] = pr["KJ"], pr["W"], pr["q_rest"]
         if cfg.model == "lambda0":
             tau[a] = pr["a"]
-            if mdl.reach_delays(cfg):  # (segmented recordings have none: NaN)
-                delay[a] = pr["delay"]
-                reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
         else:
             dur[a] = pr["a"]
+        if mdl.reach_delays(cfg):  # (segmented recordings have none: NaN)
+            delay[a] = pr["delay"]
+            reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
         tau0[a] = pr["a0"]
         status[a] = int(out["status"][i])
         if status[a] == int(Status.SUCCESSFUL) and out["integration_error_deg"][i] > INTEGRATION_TOL_DEG:

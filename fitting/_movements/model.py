@@ -12,13 +12,15 @@
   each reach's duration (``"fractions"``: of the window; of the movement duration ``T`` for
   segmented recordings, ``fitting._movements.data``), or not fitted (``"tied"``: ``τ = τ0 = T/5``,
   the paper's heuristic, and the generator's ``d`` the whole window);
-- Arimoto's ``delay`` (same unit; continuous recordings only, ``Config.delay``): how long before
-  the window's start (the rest detected before the onset) the target appeared; Eq 8's gain rises
-  as ``t²`` at first, so the hand's speed reaches the detection threshold tens of milliseconds
-  after the target's onset. A segmented recording begins with its motion: no delay.
+- the planner's ``delay`` (same unit; continuous recordings only, ``Config.delay``): how long before
+  the window's start (the rest detected before the onset) the target appeared (Arimoto; Eq 8's
+  gain rises as ``t²`` at first, so the hand's speed reaches the detection threshold tens of
+  milliseconds after the target's onset) or the generator's move began (negative: after; the
+  window starts ``ONSET_LEAD`` before the detected onset). A segmented recording begins with its
+  motion: no delay.
 
 **Per-reach nuisance parameters** (stage 2 only; ``B·k`` after the subject's ``p``): each reach's
-delay offset ``δ_b`` (Arimoto; the lead from the target's onset to the detected onset varies from
+delay offset ``δ_b`` (the lead from the target's onset to the detected onset varies from
 reach to reach by tens of milliseconds: the smoothed speed, the reach's direction) and its target
 offset ``Δx_b`` (m task coordinates: the model's target is the hand at the end of the window,
 ``fk(q_end)``, which falls short where the recorded hand was still creeping on when the next reach
@@ -47,6 +49,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 import pmpjax as pj
 
@@ -83,7 +86,7 @@ class Config:
     damping: str
     time_constants: str
     m: int = 0  # task coordinates of the per-reach target offsets (0: the targets as recorded)
-    delay: bool = True  # Arimoto: fit the target-onset delay and its per-reach offsets (continuous recordings)
+    delay: bool = True  # fit the planner's delay and its per-reach offsets (continuous recordings)
     # Parameters held at their start values (indices into the subject's p; without per-reach
     # offsets): a gauge fixed by hand, as fit_reaching's elbow rest angle.
     hold: tuple[int, ...] = ()
@@ -115,7 +118,7 @@ def n_params(cfg: Config) -> int:
 
 
 def n_timing(cfg: Config) -> int:
-    """Timing parameters: the two time constants (none when tied), then the delay (Arimoto)."""
+    """Timing parameters: the two time constants (none when tied), then the delay."""
     return (0 if cfg.time_constants == "tied" else 2) + int(reach_delays(cfg))
 
 
@@ -131,16 +134,17 @@ def param_names(cfg: Config, joints: tuple[str, ...]) -> tuple[str, ...]:
         names += tuple(f"S_W[{joints[i]},{joints[j]}]" for i, j in pairs)
     unit = "s" if cfg.time_constants == "seconds" else "T"
     if cfg.time_constants != "tied":
-        names += ((f"log(tau/{unit})",) if cfg.model == "lambda0" else ("log(duration/T)",)) + (f"log(tau0/{unit})",)
+        names += ((f"log(tau/{unit})",) if cfg.model == "lambda0" else (f"log(duration/{unit})",)) + (
+            f"log(tau0/{unit})",)
     if reach_delays(cfg):
         names += ("delay [s]" if cfg.time_constants == "seconds" else "delay/T",)
     return names
 
 
 def reach_delays(cfg: Config) -> bool:
-    """Whether the fit has a target-onset delay, and stage 2 a delay offset per reach (Arimoto's
-    planner on continuous recordings)."""
-    return cfg.model == "lambda0" and cfg.delay
+    """Whether the fit has a planner delay, and stage 2 a delay offset per reach (continuous
+    recordings)."""
+    return cfg.delay
 
 
 def unpack(theta, cfg: Config) -> dict:
@@ -186,20 +190,27 @@ def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None, t_rat
     """λ0-PMP and planner of reaches of ``duration`` (B,) [s] on normalised time; ``offsets`` (B,)
     the reaches' delay offsets (None: the subject's delay for every reach, as for unseen reaches);
     ``t_ratio`` (B,) the duration fractions refer to, per unit window (None: ones)."""
+    scale, tau0, W = reach_damping(p, duration, cfg, t_ratio)
+    model = pj.Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=W)
+    delay = (p["delay"] if offsets is None else p["delay"] + offsets) * scale
+    if cfg.model == "lambda0":
+        planner = pj.ArimotoPlanner(k=None, tau=p["a"] * scale, tau0=tau0, delay=delay)
+    else:
+        d = p["a"] * (scale if cfg.time_constants == "seconds" else jnp.ones_like(duration))
+        # (a move longer than the window is unfinished at its end)
+        planner = pj.MinimumJerkPlanner(duration=d, gain_cap=GAIN_CAP, delay=delay)
+    return model, planner
+
+
+def reach_damping(p: dict, duration, cfg: Config, t_ratio=None):
+    """Per reach (B,) on normalised time: the factor from seconds (or fractions) to it, ``τ0`` and
+    the damping ``W = τ0 W̃`` (B, n, n) (arguments as :func:`model_and_planner`'s)."""
     if cfg.time_constants == "seconds":
         scale = 1.0 / duration
     else:
         scale = jnp.ones_like(duration) if t_ratio is None else jnp.asarray(t_ratio, duration.dtype)
     tau0 = p["a0"] * scale
-    W = tau0[:, None, None] * p["W"][None]
-    model = pj.Lambda0PMP(chain, KJ=p["KJ"], q_rest=p["q_rest"], W=W)
-    if cfg.model == "lambda0":
-        delay = p["delay"] if offsets is None else p["delay"] + offsets
-        planner = pj.ArimotoPlanner(k=None, tau=p["a"] * scale, tau0=tau0, delay=delay * scale)
-    else:
-        d = p["a"] * (scale if cfg.time_constants == "seconds" else jnp.ones_like(duration))
-        planner = pj.MinimumJerkPlanner(duration=d, gain_cap=GAIN_CAP)  # (longer than the window: unfinished)
-    return model, planner
+    return scale, tau0, tau0[:, None, None] * p["W"][None]
 
 
 def simulate(chain, model, planner, q0, target, steps: int, solver: str):
@@ -287,6 +298,23 @@ def rk4_rates(chain, KJ, W, tau0, q0, *, minjerk: bool):
 #: RK4 trial parameters whose fastest rate times the step exceeds this (of RK4's 2.78) give NaN
 #: residuals: Levenberg–Marquardt rejects them instead of fitting an unstable integration.
 RK4_STABLE = 2.5
+#: RK4's step count is chosen so that the fastest rate at the start times the step is at most this:
+#: half of ``RK4_STABLE``, room for the fit's steps to stiffen the model.
+RK4_MARGIN = 1.25
+
+
+def stable_rk4_steps(rates, minimum: int, maximum: int) -> int:
+    """RK4 steps per sample interval for reaches with fastest ``rates`` [1 / normalised time]
+    (non-finite ones ignored): the fewest ``minimum · 2^j`` with ``rate · h <= RK4_MARGIN``, at most
+    ``maximum`` (powers of two, so that fits share compilations; reaches that would need more fail
+    by their status or a NaN residual instead of an endless integration)."""
+    rates = np.asarray(rates, float)
+    rates = rates[np.isfinite(rates)]
+    need = max(1.0, float(np.max(rates, initial=0.0)) / (SAMPLES - 1) / RK4_MARGIN)
+    steps = int(minimum)
+    while steps < need and steps < maximum:
+        steps *= 2
+    return min(steps, max(int(minimum), int(maximum)))
 
 
 def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str):

@@ -28,7 +28,7 @@ from .data import (
     skipped_summary,
     subject_reaches,
 )
-from .fit import MovementFit, _fk, subject_model
+from .fit import MAX_RK4_STEPS_PER_SAMPLE, MovementFit, _fk, _start_rates, subject_model
 
 BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
 
@@ -122,13 +122,39 @@ def _errors(q_pred, q_obs, status):
     return np.where(bad, np.nan, rmse), np.where(bad, np.nan, final)
 
 
+def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
+    """The fitted subject's reaches ``sr`` to ``target`` (B, m): ``q`` (B, S, n), ``status`` (B,).
+    At the fit's solver and steps; with RK4, at the fewest steps stable at each reach's start
+    (``model.stable_rk4_steps``, from the fit's), and reaches too stiff for RK4 even then by RODAS4
+    at those steps (its error estimate judges them)."""
+    steps = fit.steps_per_sample
+    solvers = np.full(len(sr), fit.solver)
+    if fit.solver == "rk4":
+        cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants, delay=not fit.segmented)
+        data = dict(duration=sr.duration[None], t_ratio=sr.t_ratio[None], q_start=sr.q_start[None],
+                    weight=np.ones((1, len(sr))))
+        rates = np.asarray(_start_rates(fit.params[fit.subject_index(subject)][None], data, fit.chain, cfg=cfg))[0]
+        steps = mdl.stable_rk4_steps(rates, steps, MAX_RK4_STEPS_PER_SAMPLE)
+        solvers[~(rates / ((SAMPLES - 1) * steps) <= mdl.RK4_STABLE)] = "rodas4"
+    q = np.full(sr.q_obs.shape, np.nan)
+    status = np.zeros(len(sr), int)
+    for solver in np.unique(solvers):
+        rows = np.flatnonzero(solvers == solver)
+        with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
+            (model, planner), _ = subject_model(fit, subject, sr.duration[rows], sr.t_ratio[rows])
+            tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], steps, str(solver))
+        q[rows] = np.asarray(tr.q)
+        status[rows] = np.asarray(tr.status).astype(int)
+    return q, status
+
+
 def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None = None) -> MovementPrediction:
     """Predict every reach of held-out ``recordings`` with each subject's fitted λ0-PMP.
 
     Each reach (found as in :func:`fit_movements`; each recording one motion for a fit of
     segmented recordings) is simulated from its recorded start posture to
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
-    step count.
+    step count (RK4: more steps where a reach's start posture needs them to stay stable).
 
     **Arguments:**
 
@@ -166,11 +192,9 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
             continue
         q0 = sr.q_start
         target = np.asarray(_fk(chain, sr.q_end))
-        with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
-            (model, planner), _ = subject_model(fit, subject, sr.duration, sr.t_ratio)
-            tr = mdl.simulate(chain, model, planner, q0, target, fit.steps_per_sample, fit.solver)
-        rows["q_pred"].append(np.asarray(tr.q))
-        rows["status"].append(np.asarray(tr.status).astype(int))
+        q_pred, status = _simulate_reaches(fit, subject, sr, target)
+        rows["q_pred"].append(q_pred)
+        rows["status"].append(status)
         for k, v in (("subject", [subject] * len(sr)), ("recording", list(sr.recording)), ("t", sr.t),
                      ("q_obs", sr.q_obs)):
             rows[k].append(np.asarray(v))

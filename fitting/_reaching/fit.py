@@ -66,9 +66,6 @@ from .model import (
     _Config,
     _generic_config,
     _param_names,
-    _rates_host,
-    _stability_steps,
-    _tau0_W,
     _unpack_host,
 )
 from .motions import (
@@ -92,19 +89,6 @@ def _as_reaches(m: _Motions) -> SubjectReaches:
                           m.q_obs[:, -1], (), np.asarray(m.t_ratio, float))
 
 
-def _rk4_steps(theta, motions: list[_Motions], cfg: _Config, elbow) -> int:
-    """RK4 steps per sample interval for stage 2 at ``theta`` (S, p): the fewest (``cfg.steps``
-    times a power of two) that keep every motion's fastest rate (``model._rates``) within half of
-    RK4's stability bound."""
-    rates = []
-    for th, e, m in zip(theta, elbow, motions):
-        if np.all(np.isfinite(th)):
-            p = {k: v[0] for k, v in _unpack_host(th[None], cfg, np.atleast_1d(e)).items()}
-            tau0, W = _tau0_W(p, np.asarray(m.t_ratio, float))
-            rates.append(_rates_host(p["KJ"], W, tau0, m.q_obs[:, 0], minjerk=cfg.model != "lambda0"))
-    return _stability_steps(np.concatenate(rates) if rates else np.zeros(1), cfg.steps)
-
-
 def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100), theta0=None,
                  keep_jac: bool = False, steps: int | None = None, solver: str | None = None) -> dict:
     """Fit every subject's usable motions (each ``len(m) >= 1``) by ``fit_movements``' engine
@@ -124,16 +108,10 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
     reaches = [_as_reaches(m) for m in motions]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (fit_reaching warns itself, naming its step option)
-        run = dict(steps=steps, solver=solver, identify=False, name="fit_reaching")
-        if solver is None and cfg.model == "lambda0_minjerk" and theta0 is None and max_steps[1] > 0:
-            # The time-base generator's gain rises to its cap as the movement ends: Rosenbrock steps
-            # lose their order there (RODAS4 1.7° off at 32 steps per sample on S01), RK4 does not.
-            # RK4 from the fewest steps stable at the stage-1 parameters (``_rk4_steps``).
-            s1 = fit_subjects(_chain(), reaches, gcfg, (max_steps[0], 0), REST_MARGIN_DEG, **run)["stage1"]
-            run.update(solver="rk4", first_steps=steps or _rk4_steps(s1["start"][:, free], motions, cfg, elbow))
-            g = fit_subjects(_chain(), reaches, gcfg, max_steps, REST_MARGIN_DEG, stage1=s1, **run)
-        else:
-            g = fit_subjects(_chain(), reaches, gcfg, max_steps, REST_MARGIN_DEG, theta0=theta0, **run)
+        if solver is None and cfg.model == "lambda0_minjerk" and steps is not None:
+            solver = "rk4"  # (the engine's choice for the time-base generator, at the steps given)
+        g = fit_subjects(_chain(), reaches, gcfg, max_steps, REST_MARGIN_DEG, theta0=theta0, steps=steps,
+                         solver=solver, identify=False, name="fit_reaching")
     weight, B = g["weight"], g["B"]
     bounds = B * SAMPLES * 4 + np.array([0, 1, 2, 3])  # (cond(KJ), the shoulder rest angles; not the elbow's)
     margin = np.deg2rad(REST_MARGIN_DEG)

@@ -48,7 +48,7 @@ from pmpjax.internal import fast_compile_jit, row_chunks
 
 from .._movements import BOUND_WIDTH as _BOUND_WIDTH
 from .._movements import GAIN_CAP as _GAIN_CAP
-from .._movements import ReachModelConfig, rk4_rates, stage2_start, unpack_params
+from .._movements import ReachModelConfig, rk4_rates, stable_rk4_steps, stage2_start, unpack_params
 from .._optimise import sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
@@ -193,15 +193,6 @@ def _simulate(model, planner, q0, target, steps: int, solver: str):
                        saveat=pj.SaveAt(ts=_SAMPLE_TIMES), solver=solver)
 
 
-def _stability_steps(rates, minimum, *, margin=1.25):
-    """RK4 steps per sample interval keeping ``rate · h <= margin`` (RK4's real-axis bound is
-    2.78); a power of two times ``minimum`` so calls share compilations, at most
-    ``MAX_STEPS_PER_SAMPLE`` (motions that would need more fail with a non-finite residual or a
-    ``SINGULAR``/``NONFINITE`` status instead of an endless integration)."""
-    rates = np.asarray(rates, float)
-    rates = rates[np.isfinite(rates)]
-    need = max(1.0, float(np.max(rates, initial=0.0)) / (SAMPLES - 1) / margin)
-    steps = int(minimum)
-    while steps < need and steps < MAX_STEPS_PER_SAMPLE:
-        steps *= 2
-    return min(steps, max(int(minimum), MAX_STEPS_PER_SAMPLE))
+def _stability_steps(rates, minimum):
+    """``fitting._movements``' ``stable_rk4_steps`` up to this module's ``MAX_STEPS_PER_SAMPLE``."""
+    return stable_rk4_steps(rates, minimum, MAX_STEPS_PER_SAMPLE)

@@ -228,21 +228,27 @@ class MinimumJerkPlanner(Planner):
     ``t`` (see ``pmpjax._base.profiles.minimum_jerk_hazard``). A ``duration`` above 60 s is
     refused as milliseconds, above 10 s it runs with a warning.
 
-    **Fields:** ``duration`` ``T`` [s]; ``gain_cap`` [1/s]; ``task_velocity`` (static, set by the
-    class) marks the task-velocity form ``F = γ B (x_d − x)`` for ``simulate``'s stability check.
+    **Fields:** ``duration`` ``T`` [s]; ``gain_cap`` [1/s]; ``delay`` [s] (default 0; as
+    :class:`ArimotoPlanner`'s): the move began ``delay`` before ``t = 0``, so ``γ(t)`` is the above at
+    ``t + delay``; a negative ``delay`` holds the hand (``γ = 0``) until ``t = −delay``, e.g. a model
+    started at rest before a detected onset. ``task_velocity`` (static, set by the class) marks the
+    task-velocity form ``F = γ B (x_d − x)`` for ``simulate``'s stability check.
     """
 
     duration: jax.Array
     gain_cap: jax.Array = 200.0
+    delay: jax.Array = 0.0
     task_velocity: bool = static_field(default=True)
 
     def __post_init__(self):
         check_positive("duration", self.duration)
         check_seconds("duration", self.duration, kind="duration")
         check_positive("gain_cap", self.gain_cap)
+        as_array("delay", self.delay)
+        check_seconds("delay", self.delay)
 
     def gain(self, t):
-        return minimum_jerk_hazard(t / self.duration, self.gain_cap, self.duration)
+        return minimum_jerk_hazard((t + self.delay) / self.duration, self.gain_cap, self.duration)
 
     def force_soa(self, t, x, target, M):
         return spd_solve(M, _scale(self.gain(t), target - x))
@@ -251,4 +257,7 @@ class MinimumJerkPlanner(Planner):
         return np.max(np.asarray(self.gain_cap))
 
     def _leaves(self):
+        return [self.duration, self.gain_cap, self.delay]
+
+    def _positive_leaves(self):
         return [self.duration, self.gain_cap]
