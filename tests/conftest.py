@@ -62,21 +62,19 @@ def pytest_unconfigure(config):
 # springy gradient last): longest first keeps the two workers even to the end instead of leaving
 # one long file to run alone (and test_movements_mjcf.py runs before the notebook that finds its
 # compiled fit in the run's shared cache). Files not listed (each under 5 s) follow in their usual
-# order. Per-file sums of `--durations=0` (setup + call) [s] of one run with
-# `-n 2 --dist loadfile`, 2026-12-06, 2 cores shared with other jobs (load 14 falling to 5 over the
-# run, so the first files' figures are inflated relative to the last ones'): reaching 1366,
-# ik_weights 1166, movements_mjcf 896, pointing 571, simulate 381, movements 371, accuracy 270,
-# donders 194, jit_safety 181, springy_rollout_gradient 96, notebook_fit_your_own_arm 91,
-# primitives_fits 60, equilibria 55, cli 54 (without a stop test that hung 303 s), stiff 52,
-# notebook_pointing 48, primitives 39, movements_planar 39, main_job_parts 38, ik_data 37,
-# springy_reflexes 36, notebook_ik_weights 35, springy_rollouts 34, notebook_sweeps 31, sweep 25,
-# notebook_lambda0_pmp 20, minimum_jerk_gain 15, notebook_fit_your_own_data 14, commands 9,
-# primitives_part 8.5, models 7.9, compile_options 7.0, sweep_command 6.7, docs 6.3 (mkdocs build
-# --strict in a subprocess), redundancy 5.8, public_api 5.7, units 5.3, optimise 5.2, kinematics 5.2.
+# order. Per-file sums of `--durations=0` (setup + call) [s] of one run in this order with
+# `-n 2 --dist loadfile` on two idle cores, 2026-12-06 (761 s in all): reaching 244, ik_weights 112,
+# pointing 110, movements 98, accuracy 95, movements_mjcf 93, main_job_parts 57, simulate 55, stiff 53,
+# donders 51, movements_planar 37, cli 34, jit_safety 32, springy_rollout_gradient 30, movements_minjerk
+# 29 (then unlisted), sweep 29, ik_data 27, notebook_pointing 26, minimum_jerk_gain 26, primitives_fits
+# 21, notebook_sweeps 15, springy_reflexes 15, primitives 13, equilibria 12, notebook_ik_weights 11,
+# springy_rollouts 11, notebook_fit_your_own_data 11, models 9.8, notebook_fit_your_own_arm 9.1 (its
+# fit compiled by movements_mjcf, in the shared cache), docs 8.4, the others under 8.5.
 SLOWEST_FIRST = (
     "test_reaching.py", "test_ik_weights.py", "test_movements_mjcf.py", "test_pointing.py", "test_simulate.py",
     "test_movements.py", "test_accuracy.py", "test_donders.py", "test_jit_safety.py",
-    "test_springy_rollout_gradient.py", "test_notebook_fit_your_own_arm.py", "test_primitives_fits.py",
+    "test_springy_rollout_gradient.py", "test_movements_minjerk.py", "test_notebook_fit_your_own_arm.py",
+    "test_primitives_fits.py",
     "test_equilibria.py", "test_cli.py", "test_stiff.py", "test_notebook_pointing.py", "test_primitives.py",
     "test_movements_planar.py", "test_main_job_parts.py", "test_ik_data.py", "test_springy_reflexes.py",
     "test_notebook_ik_weights.py", "test_springy_rollouts.py", "test_notebook_sweeps.py", "test_sweep.py",

@@ -73,7 +73,7 @@ def test_blended_equilibrium_balances_c_mujoco_gravity_and_springs(run):
         return d.qfrc_bias.copy(), d.site_xpos[arm.layout.hand_site].copy()
 
     table = rows(out / "primitives_equilibria.csv")
-    assert len(table) == 2 * 7 and all(r["status"] == "0" for r in table)
+    assert len(table) == 2 * 7 and all(r["status"] == pj.Status.SUCCESSFUL.message for r in table)
     mixed = 0
     for r in table:
         alpha = np.array([float(r[f"alpha_{nm}"]) for nm in ("rest", "down", "up", "side")])

@@ -47,7 +47,8 @@ def _ik_hugmp(ctx) -> dict:
     rows = [{"subject": names[i], "task": k + 1, **{f"w{j + 1}": float(w[i, k, j]) for j in range(w.shape[-1])},
              **{f"w{j + 1}_lo": float(lo[i, k, j]) for j in range(w.shape[-1])},
              **{f"w{j + 1}_hi": float(hi[i, k, j]) for j in range(w.shape[-1])},
-             "status": int(status[i, k]), "status_algorithm1": int(status_a1[i, k])}
+             "status": pj.status_message(int(status[i, k])),
+             "status_algorithm1": pj.status_message(int(status_a1[i, k]))}
             for i in range(w.shape[0]) for k in range(w.shape[1])]
     ctx.table(rows, "ik_weights_hugmp.csv",
               "IK weights per HuG-MP subject × task (least squares on Eq 16) with 95 % bootstrap intervals, "
@@ -102,7 +103,8 @@ def _donders_nio(ctx) -> dict:
                         for K, q in zip(KJ, q_rest)])
     z = np.einsum("spq,sq->sp", res.directions, res.coefficients - truth_c) / res.direction_stderr
     z_ident = np.where(res.identifiable, np.abs(z), 0.0).max(axis=-1)
-    rows = [{"subject": nm, "status": int(res.status[i]), "residual_rms [deg]": float(np.rad2deg(res.rms[i])),
+    rows = [{"subject": nm, "status": pj.status_message(int(res.status[i])),
+             "residual_rms [deg]": float(np.rad2deg(res.rms[i])),
              "held_out_torsion_rms [deg]": float(rms_deg[i]), "max_abs_z_identifiable": float(z_ident[i]),
              **{f"KJ_{a}{b} [Nm/rad]": float(res.KJ[i, a, b]) for a in range(3) for b in range(a, 3)},
              **{f"KJ_{a}{b} true [Nm/rad]": float(KJ[i, a, b]) for a in range(3) for b in range(a, 3)}}
@@ -362,7 +364,7 @@ def _pointing(ctx) -> dict:
     ctx.table([{"subject": name, "tau0_s": float(tc.tau0[s]), "tau0_true_s": float(tau0_true[s]),
                 "tau_s": float(tc.tau[s]), "tau_true_s": float(tau_true[s]),
                 "tau0_stderr_s": float(tc.stderr[s, 0]), "tau_stderr_s": float(tc.stderr[s, 1]),
-                "tau0_z": float(z[s, 0]), "tau_z": float(z[s, 1]), "status": int(tc.status[s]),
+                "tau0_z": float(z[s, 0]), "tau_z": float(z[s, 1]), "status": pj.status_message(int(tc.status[s])),
                 "captured_T5": int(heuristic.n_captured[s]), "captured_fitted": int(fitted.n_captured[s])}
                for s, name in enumerate(tc.subjects)],
               "pointing_time_constants.csv",

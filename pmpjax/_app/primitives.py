@@ -17,6 +17,7 @@ import itertools
 
 import numpy as np
 
+from .._base.status import status_message
 from .parts import Part
 
 # Reflex scenarios [s]: reach forward (up) and back to rest, out again, touched on the way out; a
@@ -99,7 +100,7 @@ def _primitives(ctx) -> dict:
     for i in range(2 * n):
         a = alpha[i % n]
         rows.append({
-            "rule": "blend" if i < n else "winner-take-all", "status": int(status[i]),
+            "rule": "blend" if i < n else "winner-take-all", "status": status_message(int(status[i])),
             **{f"alpha_{nm}": float(a[j]) for j, nm in enumerate(PRIMITIVE_NAMES)},
             **{f"q_set_{j + 1} [rad]": f"{q_set[i, j]:.12g}" for j in range(arm.n)},  # full precision: re-checkable
             **{f"q_eq_{j + 1} [rad]": f"{q_eq[i, j]:.12g}" for j in range(arm.n)},
