@@ -2,8 +2,8 @@
 against the Monte Carlo spread of their estimates.
 
 **Method (``movements``).** One subject's recordings, made by the independent reference of the tests
-(``tests/_movement_reference.py``: SciPy Radau of the NumPy λ0-PMP, closed-form kinematics, Eq 10's
-gain at each reach's start): a 3-joint ``pj.PlanarArm`` (links 0.30, 0.25, 0.15 m), a full,
+(``tests/_movement_reference.py``: SciPy Radau of the NumPy λ0-PMP in the run below, LSODA since,
+which agrees to 4e-10 rad; closed-form kinematics, Eq 10's gain at each reach's start): a 3-joint ``pj.PlanarArm`` (links 0.30, 0.25, 0.15 m), a full,
 anisotropic ``KJ`` (cond 5, trace 3), ``q_rest`` (40, 60, 30)°, ``τ0`` 0.12 s, ``τ`` 0.10 s, two
 continuous trials of 8 reaches (out and back to 4 targets 0.12 m from home, 1.0–1.3 s each, 0.5 s at
 rest first), sampled at 100 Hz. The noise-free trials are made once; each of ``R`` replicates adds

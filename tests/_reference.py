@@ -157,17 +157,20 @@ def pmp_field(q, F, fk_jac, KJ, q_rest, W, kind):
 
 def slsqp_equilibrium(fk, jac, KJ, q_rest, x, q0=None):
     """``argmin ½ (q − q_rest)ᵀ KJ (q − q_rest)`` s.t. ``fk(q) = x`` by SciPy SLSQP (``ftol`` 1e-15;
-    in the rare case it cycles at that tolerance, again at 1e-14)."""
+    in the rare case it cycles at that tolerance, again from where it stopped at 1e-14, then 1e-13)."""
     from scipy.optimize import minimize
 
-    for ftol in (1e-15, 1e-14):
+    start = q_rest if q0 is None else q0
+    for ftol in (1e-15, 1e-14, 1e-13):
         r = minimize(
-            lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), q_rest if q0 is None else q0,
+            lambda q: 0.5 * (q - q_rest) @ KJ @ (q - q_rest), start,
             jac=lambda q: KJ @ (q - q_rest), method="SLSQP", options={"ftol": ftol, "maxiter": 500},
             constraints=[{"type": "eq", "fun": lambda q: fk(q) - x, "jac": jac}],
         )
         if r.success:
             return r.x
+        if np.all(np.isfinite(r.x)):
+            start = r.x
     raise AssertionError(r.message)
 
 

@@ -1,6 +1,6 @@
 """``fitting.fit_movements`` / ``predict_movements`` on continuous multi-reach recordings.
 
-Reference, independent of pmpjax's simulator: ``tests/_movement_reference.py`` (SciPy Radau of the
+Reference, independent of pmpjax's simulator: ``tests/_movement_reference.py`` (SciPy LSODA of the
 NumPy λ0-PMP of ``tests/_reference.py``, Arimoto's gain with Eq 10 at each reach's start) generates
 the recordings on the 4-joint shoulder–elbow arm (``arm4_fk``/``arm4_jac``, closed form) with a
 full, anisotropic ``KJ`` and 0.2° noise; SciPy's SLSQP gives the true equilibria. What must hold:

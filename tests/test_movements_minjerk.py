@@ -1,7 +1,7 @@
 """``fitting.fit_movements(model="lambda0_minjerk")`` / ``predict_movements`` on continuous recordings
 of a 3-joint planar arm driven by the minimum-jerk time-base generator.
 
-Reference, independent of pmpjax: ``tests/_movement_reference.py`` (SciPy Radau of the NumPy
+Reference, independent of pmpjax: ``tests/_movement_reference.py`` (SciPy LSODA of the NumPy
 λ0-PMP under ``F = γ(t − t_k) (J W⁻¹ Jᵀ)⁻¹ (x_d − x)``, ``γ`` of ``tests/_reference.minjerk_gain``,
 a move of 0.8 s from each target's onset, capped at 50 /s; closed-form planar kinematics; a full,
 anisotropic ``KJ``; 0.2° noise). What must hold: the fit converges by RK4 (the generator's gain

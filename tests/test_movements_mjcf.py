@@ -3,7 +3,7 @@ a 5-joint MJCF arm, from recordings written as OpenSim ``.mot`` and CSV (and
 ``.sto``: the three formats of one trial give the same reaches).
 
 Reference, independent of pmpjax's simulator and kinematics: ``tests/_movement_reference.py``
-(SciPy Radau of the NumPy λ0-PMP, C MuJoCo's ``mj_kinematics``/``mj_jacSite`` of ``arm5.xml``,
+(SciPy LSODA of the NumPy λ0-PMP, C MuJoCo's ``mj_kinematics``/``mj_jacSite`` of ``arm5.xml``,
 Eq 10's gain at each reach's start) makes continuous multi-reach trials with a full, anisotropic
 ``KJ`` (cond 6) and 0.2° noise; SciPy's SLSQP gives the true equilibria. What must hold: the
 command exits 0 with every subject converged, the time constants within 10 % (one latency per

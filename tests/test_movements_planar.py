@@ -1,7 +1,7 @@
 """``fitting.fit_movements`` / ``predict_movements`` on a 3-joint planar arm (m = 2: one redundant
 joint), with the time constants as fractions of each reach's duration.
 
-Reference, independent of pmpjax: ``tests/_movement_reference.py`` (SciPy Radau of the NumPy
+Reference, independent of pmpjax: ``tests/_movement_reference.py`` (SciPy LSODA of the NumPy
 λ0-PMP, closed-form planar kinematics, Eq 10's gain at each reach's start) with a full,
 anisotropic ``KJ`` and 0.2° noise. The reference's τ, τ0 are in seconds and every reach lasts about
 as long, so the fitted fractions times the mean reach duration come out near them. What must hold:
