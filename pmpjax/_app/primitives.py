@@ -17,7 +17,7 @@ import itertools
 
 import numpy as np
 
-from .._base.status import status_message
+from .._base import status_message
 from .parts import Part
 
 # Reflex scenarios [s]: reach forward (up) and back to rest, out again, touched on the way out; a

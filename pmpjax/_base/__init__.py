@@ -48,6 +48,7 @@ from .rotations import mul_const as mul_const
 from .rotations import rotation_matrix as rotation_matrix
 from .rotations import rotation_rows as rotation_rows
 from .status import Status as Status
+from .status import status_message as status_message
 from .trig import sincos as sincos
 from .validate import MAX_JOINT_ANGLE as MAX_JOINT_ANGLE
 from .validate import as_array as as_array
