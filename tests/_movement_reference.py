@@ -158,3 +158,33 @@ def continuous_recording(fk_jac, KJ, q_rest, tau0, tau, q_start, targets, hold, 
         "x_final": np.stack([fk_jac(v)[0] for v in q_final]), "W": W,
     }
     return t, q_noisy, info
+
+
+#: The 3-joint planar arm of the planar tests: link lengths [m], rest posture [rad], home [m].
+PLANAR_LENGTHS = np.array([0.30, 0.25, 0.15])
+PLANAR_Q_REST = np.deg2rad([40.0, 60.0, 30.0])
+PLANAR_HOME = np.array([0.25, 0.30])
+
+
+def planar_trial(KJ, q_home, seed, *, tau0, tau=None, minjerk=None, n_out=4):
+    """One continuous trial on the planar arm: out and back from home to ``n_out`` targets 0.12 m
+    away in seeded random directions, each held 1.0–1.3 s, after 0.5 s at rest, at 100 Hz with 0.2°
+    noise (:func:`continuous_recording`'s ``tau``/``minjerk`` choose the planner). Returns
+    ``(t, q, info)``."""
+    rng = np.random.default_rng(seed)
+    ang = rng.uniform(0, 2 * np.pi, n_out)
+    out = PLANAR_HOME + 0.12 * np.stack([np.cos(ang), np.sin(ang)], 1)
+    targets = np.stack([out, np.broadcast_to(PLANAR_HOME, out.shape)], 1).reshape(-1, 2)
+    hold = rng.uniform(1.0, 1.3, size=len(targets))
+    return continuous_recording(lambda v: planar_fk_jac(v, PLANAR_LENGTHS), KJ, PLANAR_Q_REST, tau0, tau, q_home,
+                                targets, hold, fs=100.0, noise_deg=0.2, seed=seed, lead=0.5, minjerk=minjerk)
+
+
+def planar_arm_fk(q):
+    """The planar arm's hand position (2,) at ``q`` (3,) [rad] (closed form)."""
+    return planar_fk_jac(q, PLANAR_LENGTHS)[0]
+
+
+def planar_arm_jac(q):
+    """The planar arm's Jacobian (2, 3) at ``q`` (3,) [rad] (closed form)."""
+    return planar_fk_jac(q, PLANAR_LENGTHS)[1]

@@ -12,42 +12,27 @@ equilibria at the held-out targets near SciPy SLSQP's of the true ``KJ``; held-o
 predicted within 0.4° median RMSE and at most a quarter of the pseudo-inverse's.
 """
 
+import _movement_reference as ref
 import numpy as np
 import pytest
-from _movement_reference import continuous_recording, planar_fk_jac, random_spd
 from _reference import slsqp_equilibrium
 
 import fitting
 import pmpjax as pj
 
-LENGTHS = np.array([0.30, 0.25, 0.15])
+LENGTHS, Q_REST, HOME = ref.PLANAR_LENGTHS, ref.PLANAR_Q_REST, ref.PLANAR_HOME
+fk, jac = ref.planar_arm_fk, ref.planar_arm_jac
 TAU0, MOVE, CAP = 0.12, 0.8, 50.0
-Q_REST = np.deg2rad([40.0, 60.0, 30.0])
-HOME = np.array([0.25, 0.30])
 
 
-def fk(q):
-    return planar_fk_jac(q, LENGTHS)[0]
-
-
-def jac(q):
-    return planar_fk_jac(q, LENGTHS)[1]
-
-
-def trial(KJ, q_home, seed, n_out=4):
-    rng = np.random.default_rng(seed)
-    ang = rng.uniform(0, 2 * np.pi, n_out)
-    out = HOME + 0.12 * np.stack([np.cos(ang), np.sin(ang)], 1)
-    targets = np.stack([out, np.broadcast_to(HOME, out.shape)], 1).reshape(-1, 2)
-    hold = rng.uniform(1.0, 1.3, size=len(targets))
-    t, q, info = continuous_recording(lambda v: planar_fk_jac(v, LENGTHS), KJ, Q_REST, TAU0, None, q_home, targets,
-                                      hold, fs=100.0, noise_deg=0.2, seed=seed, lead=0.5, minjerk=(MOVE, CAP))
+def trial(KJ, q_home, seed):
+    t, q, info = ref.planar_trial(KJ, q_home, seed, tau0=TAU0, minjerk=(MOVE, CAP))
     return pj.JointRecording("P1", f"trial{seed}", t, q, ("q1", "q2", "q3")), info
 
 
 @pytest.fixture(scope="module")
 def case():
-    KJ = random_spd(np.random.default_rng(11), 3, cond=5.0, trace=3.0)
+    KJ = ref.random_spd(np.random.default_rng(11), 3, cond=5.0, trace=3.0)
     q_home = slsqp_equilibrium(fk, jac, KJ, Q_REST, HOME, q0=np.deg2rad([30.0, 80.0, 40.0]))
     made = [trial(KJ, q_home, s) for s in (1, 2)]
     test, info = trial(KJ, q_home, 3)

@@ -12,34 +12,27 @@ held-out reaches are predicted within 1° median RMSE and at most half the pseud
 
 import numpy as np
 import pytest
-from _movement_reference import continuous_recording, planar_fk_jac, random_spd
+from _movement_reference import (
+    PLANAR_HOME,
+    PLANAR_LENGTHS,
+    PLANAR_Q_REST,
+    planar_arm_fk,
+    planar_arm_jac,
+    planar_trial,
+    random_spd,
+)
 from _reference import slsqp_equilibrium
 
 import fitting
 import pmpjax as pj
 
-LENGTHS = np.array([0.30, 0.25, 0.15])
+LENGTHS, Q_REST, HOME = PLANAR_LENGTHS, PLANAR_Q_REST, PLANAR_HOME
+fk, jac = planar_arm_fk, planar_arm_jac
 TAU0, TAU = 0.12, 0.10
-Q_REST = np.deg2rad([40.0, 60.0, 30.0])
-HOME = np.array([0.25, 0.30])
 
 
-def fk(q):
-    return planar_fk_jac(q, LENGTHS)[0]
-
-
-def jac(q):
-    return planar_fk_jac(q, LENGTHS)[1]
-
-
-def trial(KJ, q_home, seed, n_out=4):
-    rng = np.random.default_rng(seed)
-    ang = rng.uniform(0, 2 * np.pi, n_out)
-    out = HOME + 0.12 * np.stack([np.cos(ang), np.sin(ang)], 1)
-    targets = np.stack([out, np.broadcast_to(HOME, out.shape)], 1).reshape(-1, 2)
-    hold = rng.uniform(1.0, 1.3, size=len(targets))
-    t, q, info = continuous_recording(lambda v: planar_fk_jac(v, LENGTHS), KJ, Q_REST, TAU0, TAU, q_home, targets,
-                                      hold, fs=100.0, noise_deg=0.2, seed=seed, lead=0.5)
+def trial(KJ, q_home, seed):
+    t, q, info = planar_trial(KJ, q_home, seed, tau0=TAU0, tau=TAU)
     return pj.JointRecording("P1", f"trial{seed}", t, q, ("q1", "q2", "q3")), info
 
 
