@@ -3,16 +3,17 @@ against the Monte Carlo spread of their estimates.
 
 **Method (``movements``).** One subject's recordings, made by the independent reference of the tests
 (``tests/_movement_reference.py``: SciPy Radau of the NumPy λ0-PMP in the run below, LSODA since,
-which agrees to 4e-10 rad; closed-form kinematics, Eq 10's gain at each reach's start): a 3-joint ``pj.PlanarArm`` (links 0.30, 0.25, 0.15 m), a full,
-anisotropic ``KJ`` (cond 5, trace 3), ``q_rest`` (40, 60, 30)°, ``τ0`` 0.12 s, ``τ`` 0.10 s, two
-continuous trials of 8 reaches (out and back to 4 targets 0.12 m from home, 1.0–1.3 s each, 0.5 s at
-rest first), sampled at 100 Hz. The noise-free trials are made once; each of ``R`` replicates adds
-its own 0.2° Gaussian noise per joint and sample and is fitted as a subject of one
-``fit_movements`` call (defaults). Per parameter: the standard deviation of the converged
-replicates' estimates (the truth of the spread), the median reported standard error, their ratio,
-the RMS of the z-scores ``(estimate − mean of estimates) / stderr`` and the coverage of the 95 %
-intervals ``estimate ± 1.96 stderr`` of the mean of estimates. With R replicates the spread itself
-is uncertain by about ``1/√(2(R−1))`` (13 % at R = 32, 10 % at 48).
+which agrees to 4e-10 rad; closed-form kinematics, Eq 10's gain at each reach's start): a 3-joint
+``pj.PlanarArm`` (links 0.30, 0.25, 0.15 m), a full, anisotropic ``KJ`` (cond 5, trace 3),
+``q_rest`` (40, 60, 30)°, ``τ0`` 0.12 s, ``τ`` 0.10 s, two continuous trials of 8 reaches (out and
+back to 4 targets 0.12 m from home, 1.0–1.3 s each, 0.5 s at rest first), sampled at 100 Hz. The
+noise-free trials are made once; each of ``R`` replicates adds its own 0.2° Gaussian noise per joint
+and sample and is fitted as a subject of one ``fit_movements`` call (defaults). Per parameter: the
+standard deviation of the converged replicates' estimates (the truth of the spread), the median
+reported standard error, their ratio, the RMS of the z-scores ``(estimate − mean of estimates) /
+stderr`` and the coverage of the 95 % intervals ``estimate ± 1.96 stderr`` of the mean of estimates.
+With R replicates the spread itself is uncertain by about ``1/√(2(R−1))`` (13 % at R = 32, 10 % at
+48).
 
 **Method (``reaching``).** ``fit_reaching``'s per-subject fit (its kernel ``_fit_motions``, the
 default Arimoto model with fitted time constants) on 16 motions of the HuG-MP arm between postures

@@ -34,7 +34,8 @@ def test_only_inaccurate_subjects_are_refitted_at_twice_the_steps(monkeypatch):
     def stage1(theta0, data, chain, max_steps, *, cfg):
         S = theta0.shape[0]
         return dict(x=theta0, converged=np.ones(S, bool), status=np.zeros(S, int), steps=np.full(S, 3),
-                    cost=np.ones(S), start=np.zeros((S, p)), weight=np.asarray(data["weight"]))
+                    cost=np.ones(S), start=np.zeros((S, p)), weight=np.asarray(data["weight"]),
+                    jac=np.zeros((S, 1, theta0.shape[1])))
 
     def stage2(x, data, chain, max_steps, *, cfg, steps, solver):
         names = [n for n, q in zip("ABC", subjects_q)

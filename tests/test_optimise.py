@@ -53,6 +53,28 @@ def test_batch_of_exponential_fits_matches_scipy():
         np.testing.assert_allclose(np.asarray(se[i]), se_ref, rtol=1e-6)
 
 
+def test_a_parameter_with_a_zero_column_is_held_and_counts_nowhere():
+    """A parameter the residual does not see (a held one: an exactly zero Jacobian column) stays
+    where it starts, and the fit is the fit without it: the same iterates, stop and status. Stopped
+    by the statistical rule (``stol``, whose σ² divides by N − p) and by the step rule (``xtol``,
+    relative to |x|), a held parameter counted in p or |x| (here 1e3, against the others' ~2)
+    would stop the fit at another iterate."""
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 4.0, 12)
+    y = 1.3 * np.exp(-0.7 * t) + 0.2 + rng.normal(scale=0.05, size=t.size)
+
+    def resid(p, yy):
+        return p[0] * jnp.exp(-p[1] * t) + p[2] - yy
+
+    x0 = np.array([0.6, 1.8, -0.3])
+    for opts in (dict(stol=0.3, ftol=0.0, xtol=0.0), dict(xtol=3e-4, ftol=0.0)):
+        fitted = fitting.least_squares(resid, x0, y, **opts)
+        held = fitting.least_squares(lambda z, yy: resid(z[:3], yy), np.r_[x0, 1e3], y, **opts)
+        assert float(held.x[3]) == 1e3 and int(held.steps) == int(fitted.steps) >= 2, opts
+        np.testing.assert_allclose(np.asarray(held.x[:3]), np.asarray(fitted.x), rtol=1e-12, atol=1e-14)
+        assert int(held.status) == int(fitted.status) == int(pj.Status.SUCCESSFUL)
+
+
 def test_gauss_newton_gain_matches_lstsq():
     """The statistical stopping rule's predicted decrease ``½ gᵀ (JᵀJ)⁺ g`` against NumPy's
     least-squares step ``½ |J δ|²``, ``δ = lstsq(J, r)``: a tall Jacobian with columns of very

@@ -235,14 +235,15 @@ def _stack(subjects: list[SubjectReaches], chain, bucket: int = 8, margin_deg: f
     return data
 
 
-def _held(fun, theta, cfg):
-    """``fun`` of the fitted parameters only and their start: ``theta`` with the entries
-    ``cfg.hold`` held (``fun`` itself without held parameters). Returns ``(f, z0, embed)``."""
-    if not cfg.hold:
-        return fun, theta, lambda z: z
-    free = jnp.asarray(mdl.free_index(cfg, theta.shape[0]))
-    embed = lambda z: theta.at[free].set(z)  # noqa: E731
-    return (lambda z, d: fun(embed(z), d)), theta[free], embed
+def _held(fun, theta, free):
+    """``fun`` of the parameters with those where ``free`` (same length, traced) is 0 held at
+    ``theta``'s values: ``(f, z0, embed)``. Held parameters get exactly zero Jacobian columns, which
+    Levenberg–Marquardt leaves where they are (``fitting.least_squares`` counts only the columns
+    that move the residual); a mask, not a static index, so that fits that differ only in what they
+    hold (``fit_reaching`` and its generic case) share one compilation."""
+    keep = free > 0
+    embed = lambda z: jnp.where(keep, z, theta)  # noqa: E731
+    return (lambda z, d: fun(embed(z), d)), theta, embed
 
 
 @partial(fast_compile_jit, static_argnames=("cfg",))
@@ -322,7 +323,7 @@ def _stage1(theta0, data, chain, max_steps, *, cfg):
         B = dat["weight"].shape[0]
         ok = jnp.all(jnp.isfinite(res(th0, dat)[: B * cfg.n].reshape(B, cfg.n)), axis=-1)
         dat = dict(dat, weight=jnp.where(ok, dat["weight"], 0.0))
-        f, z0, embed = _held(res, th0, cfg)
+        f, z0, embed = _held(res, th0, dat["free"][: th0.shape[0]])
         r = least_squares(f, z0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol)
         x = embed(r.x)
         return dict(x=x, converged=r.converged, status=r.status, steps=r.steps, cost=r.cost,
@@ -338,7 +339,7 @@ def _unidentified(J, cfg, rows: int, B: int):
     the identified ones). The per-reach delay offsets are profiled out first: each reach's rows are
     projected off its own offset column (a direction a reach's timing explains is not identified
     by it); the subject's delay (the last parameter) is kept whole, identified as the offsets'
-    common part. Held parameters (``cfg.hold``) have no column: ``p`` counts the fitted ones."""
+    common part. Held parameters have zero columns (and come out as unidentified)."""
     p, k = mdl.n_params(cfg) - len(cfg.hold), mdl.n_nuisance(cfg)
     Jd = J[: B * rows]
     Jd = jnp.where(jnp.isfinite(Jd), Jd, 0.0)
@@ -392,7 +393,7 @@ def _identifiability(theta, data, chain, *, cfg, steps, solver):
     Donders-fitted model: stage 2 reports them itself)."""
 
     def one(th, dat):
-        f, z, _ = _held(lambda t, d: mdl.trajectory_residual(t, d, chain, cfg, steps, solver), th, cfg)
+        f, z, _ = _held(lambda t, d: mdl.trajectory_residual(t, d, chain, cfg, steps, solver), th, dat["free"])
         J = jax.jacfwd(lambda t: f(t, dat))(z)
         return _unidentified(J, cfg, _rows(dat, cfg), dat["weight"].shape[0])
 
@@ -404,9 +405,15 @@ def _stage2(theta0, data, chain, max_steps, *, cfg, steps, solver):
     def one(th0, dat):
         res = lambda th, d: mdl.trajectory_residual(th, d, chain, cfg, steps, solver)  # noqa: E731
         lin = lambda th, d: mdl.trajectory_linearise(th, d, chain, cfg, steps, solver)  # noqa: E731
-        f, z0, embed = _held(res, th0, cfg)  # (held parameters: no per-reach offsets, ``fit_reaching``)
+        free = jnp.concatenate([dat["free"], jnp.ones(th0.shape[0] - dat["free"].shape[0], th0.dtype)])
+        f, z0, embed = _held(res, th0, free)
+
+        def lin_held(z, d):
+            r, J = lin(embed(z), d)
+            return r, J * (free > 0)[None, :]
+
         r = least_squares(f, z0, dat, max_steps=max_steps, ftol=cfg.ftol, xtol=cfg.xtol, stol=cfg.stol,
-                          linearise=lin if mdl.n_nuisance(cfg) and not cfg.hold else None)
+                          linearise=lin_held if mdl.n_nuisance(cfg) else None)
         sv, V0 = _unidentified(r.jac, cfg, _rows(dat, cfg), dat["weight"].shape[0])
         x = embed(r.x)
         err = _integration_error_one(x, dat, chain, cfg, steps, solver)
@@ -521,7 +528,11 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     are the full ``p``, held ones included; ``jac`` has the fitted ones' columns)."""
     data = _stack(subjects, chain, margin_deg=margin_deg)
     data["log_cond_max"] = np.full(len(subjects), math.log(cfg.cond_max))
-    jcfg = mdl.compiled(cfg)  # (the bound travels in data["log_cond_max"])
+    P = mdl.n_params(cfg)
+    free_cols = np.array(mdl.free_index(cfg, P))
+    data["free"] = np.zeros((len(subjects), P))
+    data["free"][:, free_cols] = 1.0
+    jcfg = mdl.compiled(cfg)  # (the bound and the held parameters travel in data)
     S = len(subjects)
     k = spd_size(cfg.n)
     fixed_steps = steps is not None
@@ -541,6 +552,7 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
         th1 = np.concatenate([np.zeros((S, k)), np.stack([s.q_end.mean(0) for s in subjects])], -1)
         s1 = {key: np.asarray(v) for key, v in jax.device_get(
             _stage1(th1, data, chain, np.int32(ms[0]), cfg=jcfg)).items()}
+        s1["jac"] = s1["jac"][..., free_cols[free_cols < k + cfg.n]]  # (the fitted ones' columns)
         out["stage1"] = s1
         data["weight"] = s1["weight"]
         theta0 = s1["start"]
@@ -590,7 +602,8 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
         redo = np.zeros(S, bool)
         redo[idx] = np.all(np.isfinite(r["x"]), axis=-1) & (err[idx] > INTEGRATION_TOL_DEG)
     out.update(singular_values=s2["singular_values"], V0=s2["V0"])
-    out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], jac=s2["jac"],
+    cols = np.concatenate([free_cols, np.arange(P, s2["jac"].shape[-1])])  # (the fitted ones' columns)
+    out.update(x=s2["x"], cost=s2["cost"], converged=s2["converged"], status=s2["status"], jac=s2["jac"][..., cols],
                residual=s2["residual"], steps=int(used.max()), integration_error_deg=err, lm2=lm2)
     bad = err > INTEGRATION_TOL_DEG
     if np.any(bad) and ms[1] > 0:

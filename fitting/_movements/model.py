@@ -88,7 +88,8 @@ class Config:
     m: int = 0  # task coordinates of the per-reach target offsets (0: the targets as recorded)
     delay: bool = True  # fit the planner's delay and its per-reach offsets (continuous recordings)
     # Parameters held at their start values (indices into the subject's p; without per-reach
-    # offsets): a gauge fixed by hand, as fit_reaching's elbow rest angle.
+    # offsets): a gauge fixed by hand, as fit_reaching's elbow rest angle. Read on the host: the
+    # compiled fits take it as the mask ``data["free"]``.
     hold: tuple[int, ...] = ()
     # Bound on cond(KJ), read on the host: the compiled fits take ``log cond_max`` from their data
     # and are called with this field at its default (``compiled``), so every bound shares a compile.
@@ -99,8 +100,9 @@ class Config:
 
 
 def compiled(cfg: Config) -> Config:
-    """``cfg`` as the compiled fits see it (a static argument): ``cond_max`` at its default."""
-    return dataclasses.replace(cfg, cond_max=STIFFNESS_COND_MAX)
+    """``cfg`` as the compiled fits see it (a static argument): ``cond_max`` at its default and no
+    ``hold`` (both travel in the data: ``log_cond_max``, the mask ``free``)."""
+    return dataclasses.replace(cfg, cond_max=STIFFNESS_COND_MAX, hold=())
 
 
 def free_index(cfg: Config, p: int):

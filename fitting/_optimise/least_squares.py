@@ -83,7 +83,8 @@ def least_squares(
     Marquardt scaling (damping on ``diag(JᵀJ)``) and Nielsen's damping update. Converged when
     ``|Jᵀr|_∞ <= gtol``, or an accepted step changes the cost by ``<= ftol·cost``, or the step is
     ``<= xtol (|x| + xtol)``, or (``stol``, statistical) the full Gauss–Newton step would lower the
-    cost by less than ``stol·σ²`` with ``σ² = 2 cost/(N − p)``: every parameter is then within
+    cost by less than ``stol·σ²`` with ``σ² = 2 cost/(N − p)`` (parameters whose Jacobian column is
+    exactly zero, held ones, count in neither ``|x|`` nor ``p``): every parameter is then within
     ``√(2 stol)`` standard errors of the optimum (``stol = 1e-4``: 0.014), which is what a fit to
     noisy data can mean by converged, also where the residual is only piecewise smooth (thresholds,
     interpolation) and Levenberg–Marquardt would crawl. Non-finite trial residuals are rejected steps.
@@ -169,7 +170,8 @@ def least_squares(
         rho = jnp.where(ok & (pred > 0), (cost - cost_new) / jnp.where(pred > 0, pred, 1.0), -1.0)
         accept = (rho > 0) | first
         lam_acc = lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-        small_step = ~first & (jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(x) + xtol))
+        active = jnp.any(J != 0, axis=0)  # (a parameter whose column is exactly zero is held, not fitted)
+        small_step = ~first & (jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(jnp.where(active, x, 0.0)) + xtol))
         small_f = ~first & accept & (jnp.abs(cost - cost_new) <= ftol * cost)
         x, r, J, cost = jax.tree_util.tree_map(
             lambda a, b: jnp.where(accept, a, b), (x_new, r_new, J_new, cost_new), (x, r, J, cost)
@@ -177,7 +179,8 @@ def least_squares(
         small_g = ~first & (jnp.max(jnp.abs(J.T @ r)) <= gtol)
         conv = small_g | small_f | small_step
         if stol is not None:
-            conv = conv | (~first & (_gauss_newton_gain(J, r) <= stol * 2.0 * cost / max(N - p, 1)))
+            dof = jnp.maximum(N - jnp.sum(jnp.any(J != 0, axis=0)), 1)
+            conv = conv | (~first & (_gauss_newton_gain(J, r) <= stol * 2.0 * cost / dof))
         # A non-finite start stops the loop (reported as not converged).
         done = conv | (first & ~ok)
         return dict(x=x, r=r, J=J, cost=cost,
