@@ -340,7 +340,7 @@ def _unidentified(J, cfg, rows: int, B: int):
     projected off its own offset column (a direction a reach's timing explains is not identified
     by it); the subject's delay (the last parameter) is kept whole, identified as the offsets'
     common part. Held parameters have zero columns (and come out as unidentified)."""
-    p, k = mdl.n_params(cfg) - len(cfg.hold), mdl.n_nuisance(cfg)
+    p, k = mdl.n_params(cfg), mdl.n_nuisance(cfg)
     Jd = J[: B * rows]
     Jd = jnp.where(jnp.isfinite(Jd), Jd, 0.0)
     G = Jd[:, :p].reshape(B, rows, p)
@@ -539,8 +539,10 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     # The time-base generator's gain rises to its cap as the move ends: Rosenbrock steps lose their
     # order there (RODAS4 1.7° off at 32 steps per sample on HuG-MP's S01), RK4 does not. It runs
     # RK4 from the fewest steps stable at the start parameters (``_rk4_start_steps``).
-    auto_rk4 = solver is None and steps is None and cfg.model == "lambda0_minjerk" and (ms[1] > 0 or identify)
-    solver, steps = solver or "rodas4", int(steps or first_steps or STEPS_PER_SAMPLE)
+    # (at steps given, RK4 at those; else from the stable count, where trajectories are simulated)
+    rk4 = solver is None and cfg.model == "lambda0_minjerk" and (fixed_steps or ms[1] > 0 or identify)
+    auto_rk4 = rk4 and not fixed_steps
+    solver, steps = solver or ("rk4" if rk4 else "rodas4"), int(steps or first_steps or STEPS_PER_SAMPLE)
     B = data["weight"].shape[1]
     out = dict(stage1=None, solver=solver, B=B)
     used0 = data["weight"] > 0
@@ -562,8 +564,7 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     if cfg.model == "lambda0_minjerk" and mdl.reach_delays(cfg) and theta0 is not None and out["stage1"] is not None:
         theta0 = _minjerk_start(theta0, data, chain, cfg)
     if auto_rk4:
-        solver, steps = "rk4", _rk4_start_steps(theta0, data, chain, jcfg, steps)
-        out["solver"] = solver
+        steps = _rk4_start_steps(theta0, data, chain, jcfg, steps)
     out["dropped"] = [np.flatnonzero(used0[i, : len(s)] & ~(out["weight"][i, : len(s)] > 0))
                       for i, s in enumerate(subjects)]
     lm2 = np.zeros(S, int)
@@ -713,11 +714,16 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         segmented=segmented, rest_margin_deg=margin_deg)
 
 
+def _fit_config(fit: MovementFit) -> mdl.Config:
+    """The model configuration of ``fit`` (as its compiled fits saw it)."""
+    return mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants, delay=not fit.segmented)
+
+
 def subject_model(fit: MovementFit, subject: str, duration, t_ratio=None):
     """The fitted subject's model and planner for reaches of ``duration`` (B,) [s] (normalised time;
     ``t_ratio`` (B,): the duration fractions refer to, per unit window)."""
     a = fit.subject_index(subject)
-    cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants, delay=not fit.segmented)
+    cfg = _fit_config(fit)
     p = mdl.unpack(jnp.asarray(fit.params[a]), cfg)
     ratio = None if t_ratio is None else jnp.asarray(t_ratio, float)
     return mdl.model_and_planner(fit.chain, p, jnp.asarray(duration, float), cfg, t_ratio=ratio), cfg

@@ -28,7 +28,7 @@ from .data import (
     skipped_summary,
     subject_reaches,
 )
-from .fit import MAX_RK4_STEPS_PER_SAMPLE, MovementFit, _fk, _start_rates, subject_model
+from .fit import MAX_RK4_STEPS_PER_SAMPLE, MovementFit, _fit_config, _fk, _start_rates, subject_model
 
 BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
 
@@ -130,7 +130,7 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
     steps = fit.steps_per_sample
     solvers = np.full(len(sr), fit.solver)
     if fit.solver == "rk4":
-        cfg = mdl.Config(fit.chain.n, fit.model, fit.damping, fit.time_constants, delay=not fit.segmented)
+        cfg = _fit_config(fit)
         data = dict(duration=sr.duration[None], t_ratio=sr.t_ratio[None], q_start=sr.q_start[None],
                     weight=np.ones((1, len(sr))))
         rates = np.asarray(_start_rates(fit.params[fit.subject_index(subject)][None], data, fit.chain, cfg=cfg))[0]

@@ -179,7 +179,7 @@ def least_squares(
         small_g = ~first & (jnp.max(jnp.abs(J.T @ r)) <= gtol)
         conv = small_g | small_f | small_step
         if stol is not None:
-            dof = jnp.maximum(N - jnp.sum(jnp.any(J != 0, axis=0)), 1)
+            dof = jnp.maximum(N - jnp.sum(active), 1)
             conv = conv | (~first & (_gauss_newton_gain(J, r) <= stol * 2.0 * cost / dof))
         # A non-finite start stops the loop (reported as not converged).
         done = conv | (first & ~ok)

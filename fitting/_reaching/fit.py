@@ -108,8 +108,6 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
     reaches = [_as_reaches(m) for m in motions]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (fit_reaching warns itself, naming its step option)
-        if solver is None and cfg.model == "lambda0_minjerk" and steps is not None:
-            solver = "rk4"  # (the engine's choice for the time-base generator, at the steps given)
         g = fit_subjects(_chain(), reaches, gcfg, max_steps, REST_MARGIN_DEG, theta0=theta0, steps=steps,
                          solver=solver, identify=False, name="fit_reaching")
     weight, B = g["weight"], g["B"]
