@@ -29,44 +29,44 @@
 Usage: ``python benchmarks/pointing.py [--sizes 1 10 100] [--scipy-budget 120] [--trials 10]
 [--repeats 3] [--quick]``; writes ``results/pointing.json``.
 
-Latest figures (2026-12-06 06:05–06:10 UTC, ``results/pointing.json``; 2-core AMD EPYC (Zen 4)
-KVM, no GPU, Python 3.11, JAX 0.10.2; load average 2.3 at the start, 5.9 at the end: another
-job's test suite shared the two cores during the JAX runs, which got 0.7–0.95 cores;
-``--repeats 5``)::
+Latest figures (2026-12-06 16:05–16:10 UTC, ``results/pointing.json``; 2-core AMD EPYC (Zen 4)
+KVM, no GPU, Python 3.11, JAX 0.10.2; idle: load average 1.5–1.7; ``--repeats 5``)::
 
     pipeline: 6 subjects x 10 trials x 16 movements (compilation included)
-      generate + write (CSV)           4.0 s
+      generate + write (CSV)           4.2 s
       read                             1.8 s
-      analyse (segment, curvature)     2.4 s
-      Donders fit (NIO)                5.7 s
-      predictions (T/5, Eq 10)         1.6 s
-      time constants (per subject)    11.2 s
-      figures 5-8 (all subjects)       6.6 s
-      total (read .. figures)         29.3 s      target < 120 s: met
+      analyse (segment, curvature)     2.5 s
+      Donders fit (NIO)                5.8 s
+      predictions (T/5, Eq 10)         1.5 s
+      time constants (per subject)    11.1 s
+      figures 5-8 (all subjects)       6.9 s
+      total (read .. figures)         29.7 s      target < 120 s: met
 
-    SciPy loop: 1.67 s/subject (63 subjects in the 120 s box; least_squares around RK45, 6
-    residual evaluations and 2-point Jacobians each; one thread, 0.91 core)
+    SciPy loop: 1.58 s/subject (74 subjects in the 120 s box; least_squares around RK45, 6
+    residual evaluations and 2-point Jacobians each; one thread, 1.00 core)
     subjects compile [s]  run [s] ms/subject  x SciPy  x (CPU)  cores converged  max |dtau| vs SciPy
-           1        20.3     0.07       65.1       26       27   0.95      1.00             2.00e-03
-          10        22.7     0.30       30.0       56       78   0.71      1.00             2.06e-04
-         100        27.9     4.10       41.0       41       58   0.70      1.00             2.06e-04
+           1         9.9     0.02       17.6       90       87   1.03      1.00             1.85e-03
+          10        12.4     0.14       13.6      116      107   1.09      1.00             3.77e-04
+         100        12.2     0.96        9.6      164      102   1.60      1.00             3.77e-04
 
-The ≥ 100× target is not met: 56× at 10 subjects and 41× at 100 in wall time, 78× and 58× in CPU
-time, core for core (the SciPy loop runs on one thread; ``fit_time_constants`` got 0.7 cores of the
-shared machine here, up to 1.6 on an idle one). ``fit_time_constants`` converges in 3
-Levenberg–Marquardt iterations per subject (4 Jacobians through ``simulate``), where the cost and
-step tolerances alone took 5 (6 Jacobians): its statistical tolerance stops within 0.014
-Gauss–Newton standard errors of the optimum, and τ0, τ move by < 0.006 standard errors; against
-SciPy's fits they agree to 2e-4 (relative). The CPU time per subject fell accordingly (100
-subjects: 29 ms against 50 ms before). Measured and kept: XLA's fusion emitters in place of
-``fast_compile_jit``'s legacy ones run this fit 1.5–2.6× slower; the unrolled RK4 stages in the
-Jacobian (``stage_loop=False``) no faster, for 2× the compile time. What is left is the
-simulation itself: per subject 16 movements × 250 RK4 steps × 4 field evaluations × 4 Jacobians,
-each with two tangents, about 0.15 µs of CPU per field evaluation or tangent. Per call: kinematics 1.6 µs
-closed form against 3.5 µs, the field 12.4 µs against 16.7 µs; ẋ on the 251-sample grid 0.13 ms
-per movement vectorised against 5.4 ms in the loop. The slow reference costs 2.2× the baseline
-per residual (residuals equal to 4e-15), so it would report 121× and 89×. The wrist is not stiff at
-these time constants: RK4 on the fits' grid (``fitting.TimeConstantFit.solver``).
+The ≥ 100× target is met: 116× at 10 subjects and 164× at 100 in wall time, 107× and 102× in CPU
+time (the SciPy loop runs on one thread; ``fit_time_constants`` used 1.1–1.6 cores). Two changes
+since the last figures (56× and 41×, measured under load): the fits simulate on a grid twice as
+coarse as the predictions' (``fitting.internal.FIT_DT`` = 0.02 T: RK4 steps ≤ τ/10 for the
+paper's τ = T/5; τ0 and τ move by ≤ 0.011 standard errors, 0.006 on average, against the fits at
+0.01 T; at τ = 0.12 T by up to 0.10 against a grid four times finer, tests/test_pointing.py), and an idle machine (at 0.01 T, idle: 20 and
+22 ms per subject, 79× and 72×). The SciPy baseline observes the model on the same grid, so both
+sides fit the same residual: they agree to 4e-4 (relative). ``fit_time_constants`` converges in 3
+Levenberg–Marquardt iterations per subject (4 Jacobians through ``simulate``): its statistical
+tolerance stops within 0.014 Gauss–Newton standard errors of the optimum. Measured and kept: XLA's
+fusion emitters in place of ``fast_compile_jit``'s legacy ones run this fit 1.5–2.6× slower; the
+unrolled RK4 stages in the Jacobian (``stage_loop=False``) no faster, for 2× the compile time.
+What is left is the simulation itself: per subject 16 movements × 125 RK4 steps × 4 field
+evaluations × 4 Jacobians, each with two tangents. Per call: kinematics 2.1 µs closed form against
+3.5 µs, the field 12.1 µs against 16.5 µs; ẋ on the 126-sample grid 85 µs per movement vectorised
+against 2.7 ms in the loop. The slow reference costs 1.8× the baseline per residual (residuals equal
+to 4e-15), so it would report 1.8× the ratios above. The wrist is not stiff at these time
+constants: RK4 on the fits' grid (``fitting.TimeConstantFit.solver``).
 """
 
 from __future__ import annotations

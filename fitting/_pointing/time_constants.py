@@ -55,9 +55,13 @@ from .analysis import PointingAnalysis
 from .observe import _kernel_halfwidth, _profiles, spline_bandwidth
 from .prediction import _check_params, _movement_inputs
 
-#: Static simulation grid of the fits, in units of the movement's duration T_sj (the predictions'
-#: default): long enough for movements up to ~2 T_sj, steps ≤ τ/10 for τ ≥ 0.1 T_sj.
-FIT_SPAN, FIT_DT = MODEL_SPAN, MODEL_DT
+#: Static simulation grid of the fits, in units of the movement's duration T_sj: the predictions'
+#: span (movements up to ~2 T_sj) at twice their step, ≤ τ/10 for τ ≥ 0.2 T_sj (the paper's T/5).
+#: Against a grid four times finer, τ0 and τ move by 0.03 and 0.10 of their standard errors at
+#: τ = 0.12 T (τ/6 per step; tests/test_pointing.py) and by ≤ 0.011 at the paper's τ ≈ T/5
+#: (benchmarks/pointing.py). The difference is second order in the step (a quarter of it at the
+#: predictions' step), where the fits cost twice as much.
+FIT_SPAN, FIT_DT = MODEL_SPAN, 2 * MODEL_DT
 #: Statistical tolerance of the time-constant fit (``fitting.least_squares``' ``stol``): converged
 #: once every parameter is within 0.014 Gauss–Newton standard errors of the optimum, which the analysed
 #: subjects reach in 3 iterations instead of the 5 that the cost and step tolerances alone take
