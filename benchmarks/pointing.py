@@ -52,21 +52,21 @@ KVM, no GPU, Python 3.11, JAX 0.10.2; idle: load average 1.5–1.7; ``--repeats 
 The ≥ 100× target is met: 116× at 10 subjects and 164× at 100 in wall time, 107× and 102× in CPU
 time (the SciPy loop runs on one thread; ``fit_time_constants`` used 1.1–1.6 cores). Two changes
 since the last figures (56× and 41×, measured under load): the fits simulate on a grid twice as
-coarse as the predictions' (``fitting.internal.FIT_DT`` = 0.02 T: RK4 steps ≤ τ/10 for the
-paper's τ = T/5; τ0 and τ move by ≤ 0.011 standard errors, 0.006 on average, against the fits at
-0.01 T; at τ = 0.12 T by up to 0.10 against a grid four times finer, tests/test_pointing.py), and an idle machine (at 0.01 T, idle: 20 and
-22 ms per subject, 79× and 72×). The SciPy baseline observes the model on the same grid, so both
-sides fit the same residual: they agree to 4e-4 (relative). ``fit_time_constants`` converges in 3
-Levenberg–Marquardt iterations per subject (4 Jacobians through ``simulate``): its statistical
-tolerance stops within 0.014 Gauss–Newton standard errors of the optimum. Measured and kept: XLA's
-fusion emitters in place of ``fast_compile_jit``'s legacy ones run this fit 1.5–2.6× slower; the
-unrolled RK4 stages in the Jacobian (``stage_loop=False``) no faster, for 2× the compile time.
-What is left is the simulation itself: per subject 16 movements × 125 RK4 steps × 4 field
-evaluations × 4 Jacobians, each with two tangents. Per call: kinematics 2.1 µs closed form against
-3.5 µs, the field 12.1 µs against 16.5 µs; ẋ on the 126-sample grid 85 µs per movement vectorised
-against 2.7 ms in the loop. The slow reference costs 1.8× the baseline per residual (residuals equal
-to 4e-15), so it would report 1.8× the ratios above. The wrist is not stiff at these time
-constants: RK4 on the fits' grid (``fitting.TimeConstantFit.solver``).
+coarse as the predictions' (``fitting.internal.FIT_DT`` = 0.02 T: RK4 steps ≤ τ/10 for the paper's τ
+= T/5; τ0 and τ move by ≤ 0.011 standard errors, 0.006 on average, against the fits at 0.01 T; at τ
+= 0.12 T by up to 0.10 against a grid four times finer, tests/test_pointing.py), and an idle machine
+(at 0.01 T, idle: 20 and 22 ms per subject, 79× and 72×). The SciPy baseline observes the model on
+the same grid, so both sides fit the same residual: they agree to 4e-4 (relative).
+``fit_time_constants`` converges in 3 Levenberg–Marquardt iterations per subject (4 Jacobians
+through ``simulate``): its statistical tolerance stops within 0.014 Gauss–Newton standard errors of
+the optimum. Measured and kept: XLA's fusion emitters in place of ``fast_compile_jit``'s legacy ones
+run this fit 1.5–2.6× slower; the unrolled RK4 stages in the Jacobian (``stage_loop=False``) no
+faster, for 2× the compile time. What is left is the simulation itself: per subject 16 movements ×
+125 RK4 steps × 4 field evaluations × 4 Jacobians, each with two tangents. Per call: kinematics 2.1
+µs closed form against 3.5 µs, the field 12.1 µs against 16.5 µs; ẋ on the 126-sample grid 85 µs per
+movement vectorised against 2.7 ms in the loop. The slow reference costs 1.8× the baseline per
+residual (residuals equal to 4e-15), so it would report 1.8× the ratios above. The wrist is not
+stiff at these time constants: RK4 on the fits' grid (``fitting.TimeConstantFit.solver``).
 """
 
 from __future__ import annotations
