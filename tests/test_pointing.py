@@ -165,15 +165,20 @@ def _jac_np(q, h=1e-7):
     return np.stack([(wrist_fk(q + h * e) - wrist_fk(q - h * e)) / (2 * h) for e in np.eye(3)], axis=1)
 
 
-def reference_movement(KJ, q_rest, tau0, tau, q0, target, t_eval):
-    """The λ0-PMP movement by solve_ivp (DOP853, rtol 1e-9) of the NumPy field of _reference,
-    with Eq 10's gain from the start posture: screen points (len(t_eval), 2)."""
+def reference_angles(KJ, q_rest, tau0, tau, q0, target, t_eval, rtol=1e-9):
+    """The λ0-PMP movement by solve_ivp (DOP853) of the NumPy field of _reference, with Eq 10's
+    gain from the start posture: joint angles (len(t_eval), 3)."""
     W = tau0 * KJ
     k = _eq10_gain(q0, KJ, W)
     gain = arimoto(k, tau)
     sol = scipy.integrate.solve_ivp(lambda t, q: pmp_qdot(q, t, target, KJ, q_rest, W, gain), (0.0, t_eval[-1]),
-                                    q0, t_eval=t_eval, method="DOP853", rtol=1e-9, atol=1e-11)
-    return np.stack([wrist_fk(q) for q in sol.y.T])
+                                    q0, t_eval=t_eval, method="DOP853", rtol=rtol, atol=rtol * 1e-2)
+    return sol.y.T
+
+
+def reference_movement(KJ, q_rest, tau0, tau, q0, target, t_eval):
+    """:func:`reference_angles` (rtol 1e-9) as screen points (len(t_eval), 2)."""
+    return np.stack([wrist_fk(q) for q in reference_angles(KJ, q_rest, tau0, tau, q0, target, t_eval)])
 
 
 def test_synthetic_experiment_samples_the_lambda0_pmp_at_120_hz(experiment):
@@ -533,6 +538,27 @@ def test_time_constants_recover_the_generating_values(analysis, experiment, monk
         np.testing.assert_allclose(res[0], r[s], atol=1e-9)  # the fit's own residual at its optimum
         shift = np.linalg.solve(H[s], -jac[s].T @ (res[1] - res[0]))
         assert np.all(np.abs(shift * [tc.tau0[s], tc.tau[s]]) < 0.25 * tc.stderr[s]), shift
+    # The reported integration error (joint angles against half the step) against the true error
+    # of the fit's simulations on its grid: solve_ivp (DOP853, rtol 1e-12) of the NumPy field, every
+    # movement of the first subject at its optimum.
+    from pmpjax.internal import normalised_movements
+
+    ok = np.flatnonzero(data["w"][0] > 0)
+    T = data["T"][0, ok]
+    sim = np.asarray(normalised_movements(KJi[0][None].repeat(ok.size, 0), qri[0][None].repeat(ok.size, 0),
+                                          tc.tau0[0] / T, tc.tau[0] / T, data["q0"][0, ok], data["target"][0, ok],
+                                          span=tcm.FIT_SPAN, dt=tcm.FIT_DT).q)
+    s_grid = np.arange(sim.shape[1]) * tcm.FIT_DT
+    true = max(np.abs(sim[i] - reference_angles(KJi[0], qri[0], tc.tau0[0], tc.tau[0], data["q0"][0, m],
+                                                data["target"][0, m], s_grid * T[i], rtol=1e-12)).max()
+               for i, m in enumerate(ok))
+    assert 0.5 < tc.integration_error_deg[0] / np.rad2deg(true) < 2.0, (tc.integration_error_deg, np.rad2deg(true))
+    assert np.all(tc.integration_error_deg < tcm.INTEGRATION_TOL_DEG)
+    # above the tolerance, a converged fit is INACCURATE, not converged (the same compiled fit)
+    monkeypatch.setattr(tcm, "INTEGRATION_TOL_DEG", 0.5 * tc.integration_error_deg.min())
+    strict = fitting.fit_time_constants(analysis, tr["KJ"], tr["q_rest"])
+    assert np.all(strict.status == pj.Status.INACCURATE) and not strict.converged.any()
+    monkeypatch.undo()
     # Generated with τ0 = 0.3 T, τ = 0.12 T (one T per subject), not the paper's T/5.
     np.testing.assert_allclose(tc.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(tc.tau, tr["tau"][:, 0], rtol=0.05)

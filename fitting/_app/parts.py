@@ -364,14 +364,17 @@ def _pointing(ctx) -> dict:
     ctx.table([{"subject": name, "tau0_s": float(tc.tau0[s]), "tau0_true_s": float(tau0_true[s]),
                 "tau_s": float(tc.tau[s]), "tau_true_s": float(tau_true[s]),
                 "tau0_stderr_s": float(tc.stderr[s, 0]), "tau_stderr_s": float(tc.stderr[s, 1]),
-                "tau0_z": float(z[s, 0]), "tau_z": float(z[s, 1]), "status": pj.status_message(int(tc.status[s])),
+                "tau0_z": float(z[s, 0]), "tau_z": float(z[s, 1]),
+                "integration_error_deg": float(tc.integration_error_deg[s]),
+                "status": pj.status_message(int(tc.status[s])),
                 "captured_T5": int(heuristic.n_captured[s]), "captured_fitted": int(fitted.n_captured[s])}
                for s, name in enumerate(tc.subjects)],
               "pointing_time_constants.csv",
               "Time constants fitted by Levenberg–Marquardt through the simulator (per subject, all 16 "
               "movements) with standard errors clustered by movement, against the generating values (the "
               "geometric mean over the subject's movements: they scale with each movement's duration) and "
-              "the z-scores (fit − truth)/SE; and the captured counts of the model with the paper's T/5 "
+              "the z-scores (fit − truth)/SE; the integration error at the optimum (joint angles against half "
+              "the step); and the captured counts of the model with the paper's T/5 "
               "heuristic and with the fitted values. The standard errors take the Donders-fitted KJ and q_rest "
               "as known: their error moves τ (and the curvature) by more (with the generating KJ, q_rest "
               "the z-scores lie within ±2 and 14–16 of 16 movements are captured, seed 0).",

@@ -62,6 +62,9 @@ from .prediction import _check_params, _movement_inputs
 #: (benchmarks/pointing.py). The difference is second order in the step (a quarter of it at the
 #: predictions' step), where the fits cost twice as much.
 FIT_SPAN, FIT_DT = MODEL_SPAN, 2 * MODEL_DT
+#: Largest integration error at the optimum a fit reports as converged [deg]: the joint angles
+#: of every movement against the same simulation at half the step (``Status.INACCURATE`` above it).
+INTEGRATION_TOL_DEG = 0.01
 #: Statistical tolerance of the time-constant fit (``fitting.least_squares``' ``stol``): converged
 #: once every parameter is within 0.014 Gauss–Newton standard errors of the optimum, which the analysed
 #: subjects reach in 3 iterations instead of the 5 that the cost and step tolerances alone take
@@ -77,9 +80,12 @@ class TimeConstantFit:
     ``tau0_movement``, ``tau_movement`` (S, L) the values each movement uses; ``stderr``
     (…, 2) standard errors of (τ0, τ) [s]; ``loss`` (…) ½|r|² at the optimum; ``rms`` (…) RMS
     residual; ``steps`` (…) LM iterations; ``status`` (…) int (``pmpjax.Status``: SUCCESSFUL,
-    MAX_STEPS, NONFINITE, TOO_FEW_DATA for items without data); ``converged`` = status == 0;
+    MAX_STEPS, NONFINITE, INACCURATE, TOO_FEW_DATA for items without data); ``converged`` = status == 0;
     ``subjects``, ``labels``, ``per_target``; ``solver`` of the simulations (``"rk4"``, or the
-    L-stable ``"rodas4"`` when RK4 at the fit's step would be unstable at the start).
+    L-stable ``"rodas4"`` when RK4 at the fit's step would be unstable at the start);
+    ``integration_error_deg`` (…) the largest joint-angle difference [deg] of the item's movements
+    at the optimum against half the step: above :data:`INTEGRATION_TOL_DEG` a converged item is
+    ``INACCURATE`` (its simulations, not the data, would decide the fit).
     """
 
     subjects: tuple
@@ -96,6 +102,7 @@ class TimeConstantFit:
     converged: np.ndarray
     per_target: bool
     solver: str = "rk4"
+    integration_error_deg: np.ndarray | None = None
 
 
 def path_residual(r0, r, KJ, q_rest, data, *, threshold, n_samples, radius, d, J, span=FIT_SPAN, dt=FIT_DT,
@@ -182,6 +189,35 @@ def _solver(KJ, q_rest, tau0, tau, data, d) -> str:
     return "rk4"
 
 
+def _integration_error_deg(KJ, q_rest, tau0, tau, data, d, solver):
+    """(items,) largest joint-angle difference [deg] over each item's movements with data between
+    the fits' grid and one of half the step, at ``tau0``, ``tau`` (items,) [s]; ``KJ`` (items, 3,
+    3), ``q_rest`` (items, 3), ``data`` as :func:`_item_data`'s. NaN for an item without a finite
+    movement; inf for all when RK4 is unstable at the optimum."""
+    T = np.asarray(data["T"], float)
+    items = T.shape[0]
+    with np.errstate(invalid="ignore"):
+        ok = (np.asarray(data["w"]) > 0) & np.isfinite(T) & (T > 0) \
+            & (np.isfinite(tau0) & np.isfinite(tau) & (tau0 > 0) & (tau > 0))[:, None]
+    if not ok.any():
+        return np.full(items, np.nan)
+    item, mov = np.nonzero(ok)
+    args = (np.asarray(KJ)[item], np.asarray(q_rest)[item], tau0[item] / T[item, mov], tau[item] / T[item, mov],
+            np.asarray(data["q0"])[item, mov], np.asarray(data["target"])[item, mov])
+    try:
+        qa, qb = (np.asarray(normalised_movements(*args, span=FIT_SPAN, dt=h, d=d, solver=solver).q)
+                  for h in (FIT_DT, FIT_DT / 2))
+    except ValueError as e:  # RK4 unstable at the fitted time constants
+        if "too large for RK4" not in str(e):
+            raise
+        return np.where(ok.any(1), np.inf, np.nan)
+    e = np.rad2deg(np.max(np.abs(qa - qb[:, ::2]), axis=(1, 2)))
+    e = np.where(np.isfinite(e), e, np.inf)
+    out = np.full(items, -1.0)
+    np.maximum.at(out, item, e)
+    return np.where(out >= 0, out, np.nan)
+
+
 def _item_data(analysis, KJ, q_rest, per_target):
     """Per-item arrays: items are subjects (M = L movements) or subject × movement (M = 1)."""
     q0, target, T, has = _movement_inputs(analysis)
@@ -247,6 +283,9 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     if not per_target:  # one (τ0, τ) per subject: movement-clustered standard errors (see below)
         se_log = _clustered_se(np.asarray(res.jac), np.asarray(res.residual), data["w"], analysis.mean_path.shape[2])
     tau = np.where(bad[:, None], np.nan, tau)
+    err = _integration_error_deg(KJi, qri, tau[:, 0], tau[:, 1], data, analysis.d, solver)
+    status = np.where((status == int(Status.SUCCESSFUL)) & ~(err <= INTEGRATION_TOL_DEG), int(Status.INACCURATE),
+                      status)
     stderr = np.where(bad[:, None], np.nan, tau * se_log)
     loss = np.where(bad, np.nan, res.cost)
     shape = (S, L) if per_target else (S,)
@@ -257,7 +296,7 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
         tau_movement=mov(tau_i), stderr=stderr.reshape(shape + (2,)), loss=loss.reshape(shape),
         rms=np.sqrt(2 * loss / n_res).reshape(shape), steps=np.asarray(res.steps).reshape(shape),
         status=status.reshape(shape), converged=(status == 0).reshape(shape), per_target=per_target,
-        solver=dict(opts)["solver"],
+        solver=dict(opts)["solver"], integration_error_deg=err.reshape(shape),
     )
 
 
@@ -273,8 +312,8 @@ class PointingModelFit:
     ``stderr`` (S, 10) its Gauss–Newton standard errors; ``loss`` (S,) ½|r|² of the weighted
     residual; ``torsion_rms`` (S,) [rad] of the Donders postures; ``path_rms`` (S,) RMS of the
     path residual (dimensionless, as in :func:`fit_time_constants`); ``weights`` (S, 2) the block
-    weights ``1/σ`` (torsion, paths); ``steps``, ``status``, ``converged``, ``solver`` as in
-    :class:`TimeConstantFit`.
+    weights ``1/σ`` (torsion, paths); ``steps``, ``status``, ``converged``, ``solver``,
+    ``integration_error_deg`` as in :class:`TimeConstantFit`.
     """
 
     subjects: tuple
@@ -293,6 +332,7 @@ class PointingModelFit:
     converged: np.ndarray
     param_names: tuple
     solver: str = "rk4"
+    integration_error_deg: np.ndarray | None = None
 
 
 JOINT_PARAMS = ("logK[PS,PS]", "logK[FE,FE]", "logK[PS,FE]", "logK[PS,RUD]", "logK[FE,RUD]", "q_rest[PS]",
@@ -407,9 +447,13 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
     finite = np.isfinite(res.cost)
     status = np.where(~has, int(Status.TOO_FEW_DATA), np.where(
         ~finite, int(Status.NONFINITE), np.where(res.converged, int(Status.SUCCESSFUL), int(Status.MAX_STEPS))))
+    err = _integration_error_deg(KJf, x[:, 5:8], np.exp(x[:, 8]), np.exp(x[:, 9]), jdata["paths"], analysis.d,
+                                 dict(opts)["solver"])
+    status = np.where((status == int(Status.SUCCESSFUL)) & ~(err <= INTEGRATION_TOL_DEG), int(Status.INACCURATE),
+                      status)
     return PointingModelFit(
         subjects=analysis.subjects, KJ=KJf, q_rest=x[:, 5:8], tau0=np.exp(x[:, 8]), tau=np.exp(x[:, 9]), params=x,
         stderr=np.asarray(se), loss=np.asarray(res.cost), torsion_rms=np.sqrt(np.sum(r_t**2, 1) / n_t),
         path_rms=np.sqrt(np.mean(r_p**2, 1)), weights=w, steps=np.asarray(res.steps), status=status,
-        converged=status == 0, param_names=JOINT_PARAMS, solver=dict(opts)["solver"],
+        converged=status == 0, param_names=JOINT_PARAMS, solver=dict(opts)["solver"], integration_error_deg=err,
     )
