@@ -663,6 +663,9 @@ def test_joint_fit_and_path_loss_gradients_match_central_differences(analysis, e
     monkeypatch.setattr(tcm, "_fit_joint", lambda *a, **kw: seen.append(fit_joint(*a, **kw)) or seen[-1])
     jf = fitting.fit_pointing_model(analysis, d, don.KJ, don.q_rest)
     assert jf.converged.all() and jf.params.shape == (2, 10)
+    # its integration error at the optimum: RK4 at the fits' step is fourth order, ~1e-6° here
+    assert jf.integration_error_deg.shape == (2,) and np.all((jf.integration_error_deg > 0)
+                                                             & (jf.integration_error_deg < 1e-3))
     np.testing.assert_allclose(jf.tau0, tr["tau0"][:, 0], rtol=0.05)
     np.testing.assert_allclose(jf.tau, tr["tau"][:, 0], rtol=0.05)
     assert np.all(jf.torsion_rms < 2.5 * don.rms) and np.all(np.isfinite(jf.stderr))
