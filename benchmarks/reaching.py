@@ -47,43 +47,46 @@ writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
 Latest figures (2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
 
-Fit cost (2026-12-06 06:00–06:06 UTC, ``results/reaching.json``; load average 5.6 at the start
-(other work on the machine), 2.4 at the end; defaults: ``max_steps=(100, 100)``, fitted time constants;
-``--rounds 3``)::
+Fit cost (2026-12-06 16:11–16:16 UTC, ``results/reaching.json``; an idle machine, load average
+1.1–1.5; defaults: ``max_steps=(100, 100)``, fitted time constants; ``--rounds 3``)::
 
     | | compile [s] | run [s] | per subject [s] | cores |
     |---|---:|---:|---:|---:|
-    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 39 | 88 | 21.2 | 0.99 |
-    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3: 11.6–17.3 s) | — | 11.6 | 11.6 | 1.59 |
-    | SciPy loop, S01 (0.63 s per residual × 15 × 24 iterations, extrapolated) | — | — | 228 | 1.00 |
-    | slow reference SciPy loop, S01 (1.64 s per residual, extrapolated) | — | — | 589 | 1.00 |
+    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 42 | 62 | 15.5 | 1.61 |
+    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3) | — | 11.9 | 11.9 | 1.60 |
+    | SciPy loop, S01 (0.61 s per residual × 15 × 24 iterations, extrapolated) | — | — | 220 | 1.16 |
+    | slow reference SciPy loop, S01 (1.65 s per residual, extrapolated) | — | — | 595 | — |
 
-    S01: SciPy loop / fit_reaching 20× (target 50×: not met); per subject of the 4-subject call
-    11× (run under load 3.5), 7× with compilation; 12× in CPU time (18 CPU-s against 228). The
-    slow reference would report 51×. Per call: arm kinematics 2.2 µs closed form against 31 µs by
-    rotation matrices, the field 13 µs against 49 µs. NumPy cost at the JAX optimum 3.9073, JAX
-    3.9073; closed form against the slow reference: fields 1.2e-12 (relative), residuals 2e-11 at
-    the tight tolerances, 6e-8 at the baseline's. Every subject converged; integration error at
-    the optimum ≤ 0.0001°.
+    S01: SciPy loop / fit_reaching 18.5× (target 50×: not met); per subject of the 4-subject call
+    14.2×, 8.6× with compilation; 11.6× in CPU time. The slow reference would report 50×. Per
+    call: arm kinematics 3.9 µs closed form against 32 µs by rotation matrices, the field 12.9 µs
+    against 44 µs. NumPy cost at the JAX optimum 3.9073, JAX 3.9073; closed form against the slow
+    reference: fields 1.3e-12 (relative), residuals 8e-12 at the tight tolerances, 2e-8 at the
+    baseline's. Every subject converged.
 
     Where the time goes (S01, warm): 25 linearisations of stage 2 (24 iterations, none rejected)
-    take all but a few percent of it; each is one forward-mode Jacobian through ``simulate``,
-    about 25 primal residuals' worth (RODAS4's Jacobian of the field, differentiated along the 14
-    parameter tangents, dominates: 5 columns × 14 second-order directions per step). Stage 1
-    (0.14 s) and the integration-error check (0.07 s) take little (both measured under load). The
-    statistical stopping rule uses a p × p eigendecomposition (1.4 ms per iteration) where an SVD
-    of the 32 000 × 14 Jacobian costs 95–270 ms under XLA:CPU (measured under load). Measured and
-    kept: XLA's fusion emitters in place of ``fast_compile_jit``'s legacy ones run the Jacobian
-    alone up to 2× faster but not the whole fit (CPU time 18.8 s against 19.2 s, compile 1.7×
-    longer); the unrolled RODAS4 stages in the Jacobian (``stage_loop=False``) run no faster and
-    compile 1.4× longer.
+    take all but a few percent of it; each is one forward-mode Jacobian through ``simulate``.
+    Measured on 160 reaches of the arm at the fit's grid (RODAS4, 2 steps per sample, 15
+    parameters): the residual 20 ms, its Jacobian 426 ms, 21 residuals' worth, 1.4 per tangent,
+    near forward mode's floor. The derivative of RODAS4's field Jacobian along the tangents is not
+    what dominates: holding it fixed (an inexact Jacobian) saves 21 % (335 ms). One RODAS4 step per
+    sample would halve the cost but diverges on S01 at the start of stage 2. The iterations: after
+    16, every parameter is within 0.02 reported (jackknife) standard errors of the optimum and the
+    cost within 6e-6 of it; the statistical rule, stated in Gauss–Newton standard errors (several
+    times smaller than the jackknife's), stops at 24. So the 50× target would need a method with
+    fewer or cheaper linearisations than Levenberg–Marquardt with exact forward-mode Jacobians
+    through a fourth-order stiff integrator. Stage 1 (0.14 s) and the integration-error check
+    (0.07 s) take little. The statistical stopping rule uses a p × p eigendecomposition (1.4 ms
+    per iteration) where an SVD of the 32 000 × 14 Jacobian costs 95–270 ms under XLA:CPU.
+    Measured and kept: XLA's fusion emitters in place of ``fast_compile_jit``'s legacy ones run
+    the Jacobian alone up to 2× faster but not the whole fit (CPU time 18.8 s against 19.2 s,
+    compile 1.7× longer); the unrolled RODAS4 stages in the Jacobian (``stage_loop=False``) run
+    no faster and compile 1.4× longer.
 
-    Cores: the SciPy loop runs on one thread (its thread 0.99 core; the process 1.15, other
-    threads of the process busy meanwhile); fit_reaching keeps 1.59 cores busy with 2 threads
-    (XLA's CPU client, one device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads but 3×4
-    products and 3×3 solves stay on the calling thread. The JAX side's run time varies with the
-    machine's other work far more than the SciPy loop's (S01 alone 11.6–17.3 s over the three
-    rounds, a residual call 0.63–0.66 s).
+    Cores: the SciPy loop runs on one thread (the process 1.16 cores, other threads of the process
+    busy meanwhile); fit_reaching keeps 1.60 cores busy with 2 threads (XLA's CPU client, one
+    device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads but 3×4 products and 3×3 solves
+    stay on the calling thread.
 
 Held-out table (2026-12-06, ``--table --max-steps 100 200``, on ``fit_movements``' engine: the
 Arimoto variants and the Donders-only model 10:21–11:21 UTC, the time-base generator's 11:57–12:12
