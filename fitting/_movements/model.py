@@ -305,6 +305,12 @@ RK4_STABLE = 2.5
 RK4_MARGIN = 1.25
 
 
+def rk4_stable(rates, steps: int):
+    """Whether RK4 at ``steps`` per sample interval is stable for reaches with fastest ``rates``
+    [1 / normalised time] (fastest rate × step within :data:`RK4_STABLE`; NumPy or traced)."""
+    return rates / ((SAMPLES - 1) * steps) <= RK4_STABLE
+
+
 def stable_rk4_steps(rates, minimum: int, maximum: int) -> int:
     """RK4 steps per sample interval for reaches with fastest ``rates`` [1 / normalised time]
     (non-finite ones ignored): the fewest ``minimum · 2^j`` with ``rate · h <= RK4_MARGIN``, at most
@@ -341,7 +347,7 @@ def trajectory_residual(theta, data, chain, cfg: Config, steps: int, solver: str
         W = jax.lax.stop_gradient(model.W)
         rate = rk4_rates(chain, jax.lax.stop_gradient(p["KJ"]), W, jnp.trace(W, axis1=-2, axis2=-1) / cfg.n,
                          data["q_start"], minjerk=cfg.model != "lambda0")
-        good &= rate / ((SAMPLES - 1) * steps) <= RK4_STABLE
+        good &= rk4_stable(rate, steps)
     good |= ~used
     parts = [jnp.where(good[:, None], r, jnp.nan).reshape(-1), bound_residual(theta, data, cfg)]
     if theta.shape[0] > n_params(cfg):

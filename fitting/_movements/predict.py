@@ -135,7 +135,7 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
                     weight=np.ones((1, len(sr))))
         rates = np.asarray(_start_rates(fit.params[fit.subject_index(subject)][None], data, fit.chain, cfg=cfg))[0]
         steps = mdl.stable_rk4_steps(rates, steps, MAX_RK4_STEPS_PER_SAMPLE)
-        solvers[~(rates / ((SAMPLES - 1) * steps) <= mdl.RK4_STABLE)] = "rodas4"
+        solvers[~mdl.rk4_stable(rates, steps)] = "rodas4"
     q = np.full(sr.q_obs.shape, np.nan)
     status = np.zeros(len(sr), int)
     for solver in np.unique(solvers):

@@ -218,6 +218,16 @@ def _integration_error_deg(KJ, q_rest, tau0, tau, data, d, solver):
     return np.where(out >= 0, out, np.nan)
 
 
+def _item_status(has, finite, converged, integration_error_deg):
+    """(items,) ``pmpjax.Status`` of the fits: TOO_FEW_DATA without data, NONFINITE, MAX_STEPS,
+    INACCURATE for a converged item whose integration error is not within
+    :data:`INTEGRATION_TOL_DEG`, else SUCCESSFUL."""
+    accurate = integration_error_deg <= INTEGRATION_TOL_DEG
+    return np.select([~has, ~finite, ~np.asarray(converged, bool), ~accurate],
+                     [int(Status.TOO_FEW_DATA), int(Status.NONFINITE), int(Status.MAX_STEPS), int(Status.INACCURATE)],
+                     int(Status.SUCCESSFUL))
+
+
 def _item_data(analysis, KJ, q_rest, per_target):
     """Per-item arrays: items are subjects (M = L movements) or subject × movement (M = 1)."""
     q0, target, T, has = _movement_inputs(analysis)
@@ -277,15 +287,12 @@ def fit_time_constants(analysis: PointingAnalysis, KJ, q_rest, *, per_target: bo
     tau = np.exp(res.x)
     n_res = np.asarray(res.residual).shape[-1]
     finite = np.isfinite(res.cost)
-    status = np.where(~has, int(Status.TOO_FEW_DATA), np.where(
-        ~finite, int(Status.NONFINITE), np.where(res.converged, int(Status.SUCCESSFUL), int(Status.MAX_STEPS))))
     bad = ~has | ~finite
     if not per_target:  # one (τ0, τ) per subject: movement-clustered standard errors (see below)
         se_log = _clustered_se(np.asarray(res.jac), np.asarray(res.residual), data["w"], analysis.mean_path.shape[2])
     tau = np.where(bad[:, None], np.nan, tau)
     err = _integration_error_deg(KJi, qri, tau[:, 0], tau[:, 1], data, analysis.d, solver)
-    status = np.where((status == int(Status.SUCCESSFUL)) & ~(err <= INTEGRATION_TOL_DEG), int(Status.INACCURATE),
-                      status)
+    status = _item_status(has, finite, res.converged, err)
     stderr = np.where(bad[:, None], np.nan, tau * se_log)
     loss = np.where(bad, np.nan, res.cost)
     shape = (S, L) if per_target else (S,)
@@ -444,13 +451,9 @@ def fit_pointing_model(analysis: PointingAnalysis, donders, KJ, q_rest, *, tau0=
     w = jdata["weights"]
     n_t = jdata["w_obs"].sum(1)
     r_t, r_p = r[:, :Np] / w[:, :1], r[:, Np:] / w[:, 1:]
-    finite = np.isfinite(res.cost)
-    status = np.where(~has, int(Status.TOO_FEW_DATA), np.where(
-        ~finite, int(Status.NONFINITE), np.where(res.converged, int(Status.SUCCESSFUL), int(Status.MAX_STEPS))))
     err = _integration_error_deg(KJf, x[:, 5:8], np.exp(x[:, 8]), np.exp(x[:, 9]), jdata["paths"], analysis.d,
                                  dict(opts)["solver"])
-    status = np.where((status == int(Status.SUCCESSFUL)) & ~(err <= INTEGRATION_TOL_DEG), int(Status.INACCURATE),
-                      status)
+    status = _item_status(has, np.isfinite(res.cost), res.converged, err)
     return PointingModelFit(
         subjects=analysis.subjects, KJ=KJf, q_rest=x[:, 5:8], tau0=np.exp(x[:, 8]), tau=np.exp(x[:, 9]), params=x,
         stderr=np.asarray(se), loss=np.asarray(res.cost), torsion_rms=np.sqrt(np.sum(r_t**2, 1) / n_t),
