@@ -16,14 +16,18 @@ turn of the recorded range): their values are a gauge, not an estimate, reported
 optimum was measured to bias τ by 13–30 % on the shoulder–elbow arm: the directions turn with
 ``KJ``.) Stage 2 fits every parameter, and each reach's delay and target offsets (nuisance
 parameters with weak priors, ``fitting._movements.model``; profiled out of the identifiability
-analysis), to the joint trajectories through ``pmpjax.simulate`` (RODAS4; for the time-base
-generator RK4 from the fewest steps stable at the start, ``_rk4_start_steps``, and on continuous
-recordings a start at ``KJ = I`` with the recorded move timing, ``_minjerk_start``; forward-mode
-derivatives, the nuisance columns ``k`` JVPs for all reaches together); the
-integration error at the optimum (against twice the steps) is checked and the step count doubled
-while it exceeds ``INTEGRATION_TOL_DEG``. Converged means Levenberg–Marquardt met a tolerance
-(relative cost change 1e-8, or every parameter within 0.014 Gauss–Newton standard errors of the
-optimum).
+analysis), to the joint trajectories through ``pmpjax.simulate`` (RODAS4 from one step per sample
+interval; for the time-base generator RK4 from the fewest steps stable at the start,
+``_rk4_start_steps``, and on continuous recordings a start at ``KJ = I`` with the recorded move
+timing, ``_minjerk_start``; forward-mode derivatives, the nuisance columns ``k`` JVPs for all
+reaches together); the integration error at the optimum (against twice the steps) is checked and
+the step count doubled while it exceeds ``INTEGRATION_TOL_DEG`` (or, at the first count, is not
+finite). That check, not ``simulate``'s status, judges the fit's simulations: ``simulate``'s
+embedded estimate bounds the error of RODAS4's third-order companion, and at one step per sample
+it often exceeds ``simulate``'s default tolerance (``INACCURATE``) where the reported
+fourth-order solution is within 0.002° of twice the steps; predictions double the steps of such
+reaches (``predict_movements``). Converged means Levenberg–Marquardt met a tolerance (relative
+cost change 1e-8, or every parameter within 0.014 Gauss–Newton standard errors of the optimum).
 
 **Standard errors** by the delete-one-reach jackknife (one Gauss–Newton step from the optimum per
 deleted reach, each reach's nuisance parameters profiled out): errors shared by the samples of a
@@ -69,9 +73,14 @@ from .data import hand_positions as _fk
 IDENTIFIABILITY_RCOND = 1e-6
 #: Largest integration error at the optimum a fit accepts [deg] (steps are doubled above it).
 INTEGRATION_TOL_DEG = 0.01
-STEPS_PER_SAMPLE = 2
+#: RODAS4's first step count per sample interval (doubled while the integration error at the
+#: optimum exceeds ``INTEGRATION_TOL_DEG``): one step is 0.0003–0.002° from twice the steps at the
+#: optima of the four HuG-MP subjects, and each doubling doubles a fit's cost.
+STEPS_PER_SAMPLE = 1
 MAX_STEPS_PER_SAMPLE = 32
-#: RK4 (the time-base generator) may start at more steps than the refinement's RODAS4.
+#: RK4 (the time-base generator) starts from at least this many steps, and may start at more
+#: steps than the refinement's RODAS4.
+RK4_STEPS_PER_SAMPLE = 2
 MAX_RK4_STEPS_PER_SAMPLE = 160
 
 
@@ -542,7 +551,8 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     # (at steps given, RK4 at those; else from the stable count, where trajectories are simulated)
     rk4 = solver is None and cfg.model == "lambda0_minjerk" and (fixed_steps or ms[1] > 0 or identify)
     auto_rk4 = rk4 and not fixed_steps
-    solver, steps = solver or ("rk4" if rk4 else "rodas4"), int(steps or first_steps or STEPS_PER_SAMPLE)
+    solver, steps = solver or ("rk4" if rk4 else "rodas4"), int(
+        steps or first_steps or (RK4_STEPS_PER_SAMPLE if rk4 else STEPS_PER_SAMPLE))
     B = data["weight"].shape[1]
     out = dict(stage1=None, solver=solver, B=B)
     used0 = data["weight"] > 0
@@ -589,8 +599,9 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     err = np.rad2deg(s2["integration_error"])
     used = np.full(S, steps)
     # Only the subjects whose integration error at the optimum is above the tolerance are fitted
-    # again, from their optimum, at twice the steps.
-    redo = np.all(np.isfinite(s2["x"]), axis=-1) & (err > INTEGRATION_TOL_DEG) & (ms[1] > 0) & (not fixed_steps)
+    # again, from their optimum, at twice the steps; at the first step count also those whose
+    # error is not finite (simulations that failed at the start: from their start).
+    redo = np.all(np.isfinite(s2["x"]), axis=-1) & ~(err <= INTEGRATION_TOL_DEG) & (ms[1] > 0) & (not fixed_steps)
     while np.any(redo) and steps < MAX_STEPS_PER_SAMPLE:
         steps *= 2
         idx = np.flatnonzero(redo)
@@ -642,6 +653,7 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
     sv, unident, V0 = nan(S_all, p), [()] * S_all, np.zeros((S_all, p, p))
     bound = np.zeros((S_all, 1 + n), bool)
     reach_delay, target_shift, dropped = {}, {}, {}
+    stage2 = out["residual"] is not None
     for a, s in enumerate(names_all):
         if s not in idx:
             continue
@@ -667,8 +679,9 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
             reach_delay[s] = float(pr["delay"]) + (offsets if offsets.size else np.zeros(len(usable[s])))
         tau0[a] = pr["a0"]
         status[a] = int(out["status"][i])
-        if status[a] == int(Status.SUCCESSFUL) and out["integration_error_deg"][i] > INTEGRATION_TOL_DEG:
-            status[a] = int(Status.INACCURATE)  # (converged on a simulation that is not accurate enough)
+        # (converged on a simulation that is not accurate enough, or whose error is not finite)
+        if status[a] == int(Status.SUCCESSFUL) and stage2 and not out["integration_error_deg"][i] <= INTEGRATION_TOL_DEG:
+            status[a] = int(Status.INACCURATE)
         n_reach[a] = max(int(np.sum(out["weight"][i][: len(usable[s])] > 0)), 1)  # (left-out reaches: zero rows)
         for j in out["dropped"][i]:
             dropped.setdefault(s, []).append((usable[s].recording[j], float(usable[s].t[j, 0]),

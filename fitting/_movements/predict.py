@@ -126,7 +126,8 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
     """The fitted subject's reaches ``sr`` to ``target`` (B, m): ``q`` (B, S, n), ``status`` (B,).
     At the fit's solver and steps; with RK4, at the fewest steps stable at each reach's start
     (``model.stable_rk4_steps``, from the fit's), and reaches too stiff for RK4 even then by RODAS4
-    at those steps (its error estimate judges them)."""
+    at those steps. Reaches whose error estimate is above ``simulate``'s tolerance (``INACCURATE``)
+    are simulated again at twice the steps, up to three times."""
     steps = fit.steps_per_sample
     solvers = np.full(len(sr), fit.solver)
     if fit.solver == "rk4":
@@ -142,9 +143,15 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
         rows = np.flatnonzero(solvers == solver)
         with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
             (model, planner), _ = subject_model(fit, subject, sr.duration[rows], sr.t_ratio[rows])
-            tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], steps, str(solver))
-        q[rows] = np.asarray(tr.q)
-        status[rows] = np.asarray(tr.status).astype(int)
+            at, redo = steps, np.ones(len(rows), bool)
+            for _ in range(4):  # (the fit's steps, then twice, four and eight times as many)
+                tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], at, str(solver))
+                q[rows[redo]] = np.asarray(tr.q)[redo]
+                status[rows[redo]] = np.asarray(tr.status).astype(int)[redo]
+                redo = status[rows] == int(Status.INACCURATE)
+                if not redo.any():
+                    break
+                at *= 2
     return q, status
 
 
@@ -154,7 +161,9 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
     Each reach (found as in :func:`fit_movements`; each recording one motion for a fit of
     segmented recordings) is simulated from its recorded start posture to
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
-    step count (RK4: more steps where a reach's start posture needs them to stay stable).
+    step count (RK4: more steps where a reach's start posture needs them to stay stable), and at
+    twice, four or eight times the steps where ``simulate``'s error estimate calls the reach
+    ``INACCURATE``.
 
     **Arguments:**
 

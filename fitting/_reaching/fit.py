@@ -300,7 +300,7 @@ def fit_reaching(
       in the paper). Stage 1 converges in under 80 iterations on the bundled subjects; its
       status is the Donders-only model's.
     - ``solver`` ("rk4", "rodas4") and ``steps_per_sample`` (steps per 1/49 of normalised time) of
-      stage 2: when None, RODAS4 from 2 steps, doubled for a subject while its integration error
+      stage 2: when None, RODAS4 from 1 step, doubled for a subject while its integration error
       at the optimum exceeds 0.01° (up to 32); given, they are used as they are. The result says
       what was used (``solver``, ``steps_per_sample``, ``integration_error_deg``).
     - ``stiffness_cond_max``: bound on cond(KJ) (None: no bound). Final postures alone leave
@@ -442,8 +442,9 @@ def _assemble_fit(names, usable, out, ikw, problems, skipped, cfg, reps, tasks, 
         active[a] |= _bound_pull_se(x, out["residual"][k], out["cov"][k], cost, n, out["lo"][k], out["hi"][k],
                                     cfg, out["elbow"][k]) > BOUND_PULL_SE
         status[a] = int(out["status"][k]) if np.isfinite(cost) else int(Status.NONFINITE)
-        if status[a] == int(Status.SUCCESSFUL) and integration[a] > INTEGRATION_TOL_DEG:
-            status[a] = int(Status.INACCURATE)  # (converged on simulations that are not accurate enough)
+        # (converged on simulations that are not accurate enough, or whose error is not finite)
+        if status[a] == int(Status.SUCCESSFUL) and out["stage"] == 2 and not integration[a] <= INTEGRATION_TOL_DEG:
+            status[a] = int(Status.INACCURATE)
     return ReachingFit(
         subjects=tuple(names), converged=status == 0, status=status, param_names=_param_names(cfg),
         n_motions=n_motions, n_residuals=n_res, lm_steps=lm_steps, model=cfg.model, damping=cfg.damping,
