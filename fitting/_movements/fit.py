@@ -680,7 +680,8 @@ def _assemble(chain, found, usable, out, cfg, joints, margin_deg=mdl.REST_MARGIN
         tau0[a] = pr["a0"]
         status[a] = int(out["status"][i])
         # (converged on a simulation that is not accurate enough, or whose error is not finite)
-        if status[a] == int(Status.SUCCESSFUL) and stage2 and not out["integration_error_deg"][i] <= INTEGRATION_TOL_DEG:
+        accurate = out["integration_error_deg"][i] <= INTEGRATION_TOL_DEG
+        if status[a] == int(Status.SUCCESSFUL) and stage2 and not accurate:
             status[a] = int(Status.INACCURATE)
         n_reach[a] = max(int(np.sum(out["weight"][i][: len(usable[s])] > 0)), 1)  # (left-out reaches: zero rows)
         for j in out["dropped"][i]:
