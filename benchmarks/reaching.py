@@ -47,54 +47,57 @@ writes ``results/reaching.json`` (other subjects: ``reaching_S01….json``).
 
 Latest figures (2-core AMD EPYC (Zen 4) KVM, no GPU, jax 0.10.2, float64).
 
-Fit cost (2026-12-06 16:11–16:16 UTC, ``results/reaching.json``; an idle machine, load average
-1.1–1.5; defaults: ``max_steps=(100, 100)``, fitted time constants; ``--rounds 3``)::
+Fit cost (2026-12-06 17:46–17:49 UTC, ``results/reaching.json``; load average 1.5–1.8 (2.6 at
+the start of the 4-subject call); defaults: ``max_steps=(100, 100)``, fitted time constants,
+RODAS4 from one step per sample; ``--rounds 3``)::
 
     | | compile [s] | run [s] | per subject [s] | cores |
     |---|---:|---:|---:|---:|
-    | fit_reaching, 4 subjects (rodas4 ×2; stage-2 iterations 24, 24, 16, 18) | 42 | 62 | 15.5 | 1.61 |
-    | fit_reaching, S01 alone (24 stage-2 iterations; fastest of 3) | — | 11.9 | 11.9 | 1.60 |
-    | SciPy loop, S01 (0.61 s per residual × 15 × 24 iterations, extrapolated) | — | — | 220 | 1.16 |
-    | slow reference SciPy loop, S01 (1.65 s per residual, extrapolated) | — | — | 595 | — |
+    | fit_reaching, 4 subjects (rodas4 ×1; stage-2 iterations 18, 23, 15, 16) | 32 | 23 | 5.7 | 1.58 |
+    | fit_reaching, S01 alone (18 stage-2 iterations; fastest of 3) | — | 4.3 | 4.3 | 1.60 |
+    | SciPy loop, S01 (0.60 s per residual × 15 × 18 iterations, extrapolated) | — | — | 162 | 1.17 |
+    | slow reference SciPy loop, S01 (1.55 s per residual, extrapolated) | — | — | 418 | — |
 
-    S01: SciPy loop / fit_reaching 18.5× (target 50×: not met); per subject of the 4-subject call
-    14.2×, 8.6× with compilation; 11.6× in CPU time. The slow reference would report 50×. Per
-    call: arm kinematics 3.9 µs closed form against 32 µs by rotation matrices, the field 12.9 µs
+    S01: SciPy loop / fit_reaching 37.8× (target 50×: not met); per subject of the 4-subject call
+    28.6×, 11.4× with compilation; 23.5× in CPU time. The slow reference would report 97×. Per
+    call: arm kinematics 2.3 µs closed form against 31 µs by rotation matrices, the field 13.0 µs
     against 44 µs. NumPy cost at the JAX optimum 3.9073, JAX 3.9073; closed form against the slow
-    reference: fields 1.3e-12 (relative), residuals 8e-12 at the tight tolerances, 2e-8 at the
-    baseline's. Every subject converged.
+    reference: fields 1.4e-12 (relative), residuals 1.5e-11 at the tight tolerances, 2.6e-7 at
+    the baseline's. Every subject converged; integration errors 0.0003–0.002° (against twice the
+    steps). Matched accuracy: at the optimum of S01 the baseline's LSODA (rtol 1e-6) is 0.00038°
+    from a tight solution (rtol 1e-11), the fit's RODAS4 0.00025° from twice its steps; at rtol
+    1e-5 LSODA is 0.004° off and 8 % faster per call, at 1e-4 0.033° (above the fits' 0.01°).
 
-    Where the time goes (S01, warm): 25 linearisations of stage 2 (24 iterations, none rejected)
-    take all but a few percent of it; each is one forward-mode Jacobian through ``simulate``.
-    Measured on 160 reaches of the arm at the fit's grid (RODAS4, 2 steps per sample, 15
-    parameters): the residual 20 ms, its Jacobian 426 ms, 21 residuals' worth, 1.4 per tangent,
-    near forward mode's floor. The derivative of RODAS4's field Jacobian along the tangents is not
-    what dominates: holding it fixed (an inexact Jacobian) saves 21 % (335 ms). One RODAS4 step per
-    sample would halve the cost but diverges on S01 at the start of stage 2. The iterations: after
-    16, every parameter is within 0.02 reported (jackknife) standard errors of the optimum and the
-    cost within 6e-6 of it; the statistical rule, stated in Gauss–Newton standard errors (several
-    times smaller than the jackknife's), stops at 24. Measured and not adopted: Levenberg–Marquardt
-    with Broyden updates of the Jacobian between exact ones (an exact one after a rejected step,
-    after 20 updates and before every convergence test) reaches the same optimum (cost equal to 9
-    digits) with 17 exact Jacobians and 52 residuals instead of 25 Jacobians: 9.0 s against 11.9 s,
-    1.33×. So the 50× target would need a method with
-    fewer or cheaper linearisations than Levenberg–Marquardt with exact forward-mode Jacobians
-    through a fourth-order stiff integrator. Stage 1 (0.14 s) and the integration-error check
-    (0.07 s) take little. The statistical stopping rule uses a p × p eigendecomposition (1.4 ms
-    per iteration) where an SVD of the 32 000 × 14 Jacobian costs 95–270 ms under XLA:CPU.
-    Measured and kept: XLA's fusion emitters in place of ``fast_compile_jit``'s legacy ones run
-    the Jacobian alone up to 2× faster but not the whole fit (CPU time 18.8 s against 19.2 s,
-    compile 1.7× longer); the unrolled RODAS4 stages in the Jacobian (``stage_loop=False``) run
-    no faster and compile 1.4× longer.
+    Before (16:11 UTC, idle, two RODAS4 steps per sample and stage 2 from ``τ = T/5``): S01 11.9 s,
+    24 iterations, 18.5×; 4 subjects 62 s run, 42 s compile, 82 iterations. One step per sample
+    halves each linearisation (1.4 residuals per tangent through RODAS4: forward mode's floor);
+    starting the planner's ``τ`` at ``T`` (the fitted ``τ/T`` lie in 1.07–1.97) saves 10 of the
+    82 iterations and avoids the first step that diverged at one step per sample on S01 (from
+    ``τ = T/5``). The optima agree within 0.009 standard errors. Measured again and not adopted:
+    Levenberg–Marquardt with Broyden updates of the Jacobian between exact ones (an exact one
+    after a rejected step, after 20 updates and before every convergence test), 1.33× faster with
+    two steps per sample, is now slower (4.86 s against 4.31 s: 18 exact Jacobians and 50
+    residuals against 18 Jacobians). Every linearisation is one forward-mode Jacobian through
+    RODAS4; 50× would need about 25 % less per linearisation, or fewer linearisations than
+    Levenberg–Marquardt with exact Jacobians (the SciPy loop is extrapolated with the JAX fit's
+    iteration count, so fewer iterations alone do not change the ratio). Earlier measurements at
+    two steps per sample: holding RODAS4's field Jacobian fixed along the tangents (an inexact
+    Jacobian) saves 21 %; the statistical rule uses a p × p eigendecomposition (1.4 ms per
+    iteration) where an SVD of the 32 000 × 14 Jacobian costs 95–270 ms under XLA:CPU; XLA's
+    fusion emitters run the Jacobian alone up to 2× faster but not the whole fit (compile 1.7×
+    longer); unrolled RODAS4 stages run no faster and compile 1.4× longer.
 
-    Cores: the SciPy loop runs on one thread (the process 1.16 cores, other threads of the process
+    Cores: the SciPy loop runs on one thread (the process 1.17 cores, other threads of the process
     busy meanwhile); fit_reaching keeps 1.60 cores busy with 2 threads (XLA's CPU client, one
     device). OpenBLAS (NumPy's and SciPy's) is set to 2 threads but 3×4 products and 3×3 solves
     stay on the calling thread.
 
 Held-out table (2026-12-06, ``--table --max-steps 100 200``, on ``fit_movements``' engine: the
 Arimoto variants and the Donders-only model 10:21–11:21 UTC, the time-base generator's 11:57–12:12
-UTC, under other load; ``results/reaching_table.md``): every pooled median held-out RMSE within
+UTC, under other load; ``results/reaching_table.md``; at the defaults then, two RODAS4 steps
+per sample and stage 2 from ``τ = T/5``: the default variant's optima move by at most 0.009
+standard errors on the four subjects with the current ones, the free-damping variants' by
+0.02 on S01 and S03 with the new start): every pooled median held-out RMSE within
 0.00015° of the table of the earlier, separate ``fit_reaching`` implementation (2026-12-05), and
 every fit of every variant converged on all four subjects. Pooled median held-out RMSE [deg]:
 Donders-only 15.1; Arimoto planner tied

@@ -8,7 +8,7 @@ recordings whose held-out repetitions are replaced; central differences of the f
 
 Compile budget: every fit here uses one configuration (Arimoto planner, ``W = τ0 KJ``, fitted
 time constants, one subject, a 16-motion bucket, the solver and step count the fit picks: RODAS4
-at 2 steps per sample), so stage 1 and stage 2 of the fit compile once for the module. The bound
+from one step per sample), so stage 1 and stage 2 of the fit compile once for the module. The bound
 on cond(KJ) is data of the compiled fit, not configuration: the synthetic fit's 1e4 and the
 default share those compiles, and the bounds test's fits (none, 1.2; 32 motions) share one stage 1.
 """
