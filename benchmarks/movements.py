@@ -27,8 +27,9 @@ cond ≤ 11), ``q_rest`` (±8° around (25, 12, 25, 68, 5)°), ``τ0`` ∈ [0.09
    start to exit, seen by the parent) is reported too.
 2. **Batch scaling** (``scaling``): S = 4, 16, 64 subjects (the first S of one set of 64) with
    one trial of 6 reaches each (``fit_movements`` pads every subject to 8), ``fit_movements``
-   defaults except that the step count is held at 2 per sample (the library's
-   ``MAX_STEPS_PER_SAMPLE`` set to its start in the worker; ``--scaling-defaults`` lifts it):
+   defaults except that the step count is held at its start, one per sample (two in the
+   figures below; the library's ``MAX_STEPS_PER_SAMPLE`` set to its start in the worker;
+   ``--scaling-defaults`` lifts it):
    ``fit_movements`` otherwise repeats stage 2 for the whole batch, with a new compile, while any
    one subject's integration error exceeds 0.01°, and then S no longer measures the batch. Each S
    runs in its own fresh process as above. Up to ``--second-call-max`` subjects (4) the fit is
@@ -48,7 +49,7 @@ cond ≤ 11), ``q_rest`` (±8° around (25, 12, 25, 68, 5)°), ``τ0`` ∈ [0.09
    drawn in the joint ranges, alone and with its derivative along each joint (``jax.linearize``
    and a ``vmap`` over the 5 unit tangents, as RODAS4 forms its Jacobian), jitted with the chain as
    an argument; ``pj.simulate`` of 24 and of 256 reaches with ``solver="rodas4"`` in the fit's
-   configuration (normalised time, 50 samples, 2 steps per sample; the first cold subject's
+   configuration then (normalised time, 50 samples, 2 steps per sample; the first cold subject's
    parameters, reaches of 1.2 s, targets 0.10–0.15 m from home); and ``jax.jacfwd`` of that
    simulation of 24 reaches with respect to 22 parameters (q_rest, a symmetric change of KJ, log τ,
    log τ0: stage 2's work per iteration on one subject of 20 reaches). Compile = ``jax.jit(f).lower``
@@ -72,27 +73,34 @@ Latest figures: 2026-12-06 03:15–03:49 UTC, 2-core AMD EPYC (KVM), no GPU, jax
 MuJoCo 4.0.1, float64; 33.5 min in all, load average 2.2 at the start and 4.1
 at the end (other work shared the machine; per part below).
 
-Cold fit + predict, 4 subjects × 20 reaches, 10 held out each (load 1.9 → 2.8)::
+Cold fit + predict, 4 subjects × 20 reaches, 10 held out each (2026-12-06 18:04 UTC, this part
+alone with ``--parts cold``; load 0.5 → 1.4; RODAS4 from one step per sample)::
 
     | | wall [s] | compile [s] | run [s] |
     |---|---:|---:|---:|
-    | process (interpreter start to exit) | 140.0 | | |
-    | imports (jax, pmpjax, fitting) | 0.8 | | |
+    | process (interpreter start to exit) | 73.5 | | |
+    | imports (jax, pmpjax, fitting) | 0.7 | | |
     | chain + recordings | 0.8 | | |
-    | · stage1 (call 1) | 8.2 | 8.0 | 0.2 |
-    | · stage2 (call 2) | 105.6 | 53.7 | 51.9 |
-    | fit_movements | 116.2 | 63.6 | 52.6 |
-    | predict_movements | 20.9 | 20.7 | 0.2 |
-    | **fit + predict** | **137.1** | 84.3 | 52.8 |
+    | · stage1 (call 1) | 7.1 | 7.0 | 0.1 |
+    | · stage2 (call 2) | 45.0 | 31.9 | 13.1 |
+    | fit_movements | 53.8 | 40.0 | 13.8 |
+    | predict_movements | 17.1 | 16.8 | 0.2 |
+    | **fit + predict** | **70.8** | 56.8 | 14.0 |
 
-    137 s against the 300 s target (met); 61 % of it compilation: stage 2's 54 s, and
-    predict_movements' 21 s, nearly all of its time. Every subject converged at 2 steps per
-    sample (stage-2 iterations 20–30; stage 1 40–100, one at its cap), integration error ≤
-    0.0005°, training RMSE 0.20–0.24° (the noise); 40 of 40 held-out reaches found, median
-    held-out RMSE 0.23° against the pseudo-inverse's 3.5°. Fitted τ 5–23 % above the truth, τ0
-    8–15 % below. The fit keeps 1.1 of the 2 cores busy.
+    71 s against the 300 s target (met); 80 % of it compilation. Every subject converged at one
+    step per sample (stage-2 iterations 21–33; stage 1 61–100, three at the cap), integration
+    error 0.0018–0.0061° (against twice the steps; the tolerance is 0.01°); 40 of 40 held-out
+    reaches found, median held-out RMSE 0.22° against the pseudo-inverse's 3.5°; fitted τ 0.3–7 %
+    above the truth, τ0 1–6 % below. The code before, at two steps per sample, in the same
+    conditions right after (load 1.1 → 1.6): fit + predict 79.3 s, stage 2 24.5 s run (stage-2
+    iterations 31 against 33 on one subject, the others the same; integration error
+    0.0002–0.0005°; τ's relative error within 0.0003 and the held-out RMSE within 0.0001° of
+    now); ``predict_movements`` now compiles 4 s longer (it simulates again at two steps the
+    reaches whose embedded error estimate is above ``simulate``'s tolerance). Earlier run of the
+    full benchmark (03:15, load 1.9 → 2.8, two steps per sample): 137 s.
 
-Batch scaling, 6 reaches per subject, steps held at 2::
+Batch scaling, 6 reaches per subject, steps held at 2 (03:15–03:49, before one step per sample
+became the default)::
 
     | S | 1st call [s] | compile [s] | run [s] | run/subject [s] | 1st call/subject [s] | iter. | run/iter. [s] | load |
     |---:|---:|---:|---:|---:|---:|---:|---:|---|
