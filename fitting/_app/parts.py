@@ -540,7 +540,7 @@ ik_figures = Part(_ik_figures, seconds=7, seconds_full=8, order=30,
                   title="IK weights on the paper's examples (Khoramshahi et al. Figures 1–3)")
 ik_synthetic = Part(_ik_synthetic, seconds=6, seconds_full=8, order=40,
                     title="IK weights in two conditions, with Hotelling's T² (Experiment 1)")
-ik_hugmp = Part(_ik_hugmp, seconds=20, seconds_full=270, order=50,
+ik_hugmp = Part(_ik_hugmp, seconds=20, seconds_full=550, order=50,
                 title="IK weights of the HuG-MP recordings")
 reaching = Part(_reaching, seconds=45, seconds_full=106, order=60,
                 title="HuG-MP reaching: the fitted λ0-PMP on held-out movements")
