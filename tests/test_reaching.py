@@ -587,6 +587,9 @@ def test_bounds_hold_and_are_reported_where_they_bind(folders, monkeypatch):
     assert mfit._stage1._cache_size() == compiled  # the bound is data: no new compile
     cond = lambda K: np.linalg.eigvalsh(K)[-1] / np.linalg.eigvalsh(K)[0]  # noqa: E731
     assert cond(free.KJ[0]) > 10 and not free.bound_active[0, 0]
+    # a Donders-fitted model (no stage 2) moves with the paper's time constants, τ = τ0 = T/5
+    # (stage 2 starts its fitted τ elsewhere)
+    assert free.tau_over_T[0] == pytest.approx(0.2, rel=1e-12) and free.tau0_over_T[0] == pytest.approx(0.2, rel=1e-12)
     assert 1.2 * 0.93 < cond(tight.KJ[0]) < 1.2 * 1.01 and tight.bound_active[0, 0]
     assert tight.stiffness_cond[0] == pytest.approx(cond(tight.KJ[0])) and tight.stiffness_cond_max == 1.2
     # The rest-angle bounds, the subject's recorded range widened by 20° (documented). Where a bound

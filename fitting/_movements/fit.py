@@ -590,6 +590,8 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
                    jac=None, residual=None, steps=steps,
                    integration_error_deg=np.full(S, np.nan), lm2=lm2)
         return out
+    if out["stage1"] is not None:  # (the Donders-fitted model above keeps the paper's T/5)
+        theta0 = mdl.stage2_tau_start(theta0, cfg)
     x = np.concatenate([theta0, np.zeros((S, B * mdl.n_nuisance(cfg)))], axis=1) \
         if theta0.shape[1] == mdl.n_params(cfg) and not cfg.hold else theta0
     run = lambda x, d, st: {key: np.array(v) for key, v in jax.device_get(  # noqa: E731

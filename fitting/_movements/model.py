@@ -182,16 +182,26 @@ def unpack(theta, cfg: Config) -> dict:
 def stage2_start(theta1, cfg: Config):
     """Stage-2 start from the stage-1 postural parameters: ``W̃`` at ``KJ`` (``"full"``) or
     ``diag KJ`` (``"diagonal"``), time constants at ``START_SECONDS`` / ``START_FRACTION`` (the
-    Arimoto planner's fitted ``τ/T`` at ``START_TAU_FRACTION``, the time-base generator's duration
-    at the whole reach)."""
+    time-base generator's duration at the whole reach): the Donders-fitted model's time constants.
+    Stage 2 itself starts the Arimoto planner's fitted ``τ/T`` at ``START_TAU_FRACTION``
+    (:func:`stage2_tau_start`)."""
     KJ = stiffness_from_params(theta1[:spd_size(cfg.n)], cfg.n, float(cfg.n))
     parts = [theta1, damping_start(KJ, cfg.damping)]
     t0 = math.log(START_SECONDS if cfg.time_constants == "seconds" else START_FRACTION)
-    first = 0.0 if cfg.model == "lambda0_minjerk" else (
-        math.log(START_TAU_FRACTION) if cfg.time_constants == "fractions" else t0)
+    first = 0.0 if cfg.model == "lambda0_minjerk" else t0
     timing = ([first, t0] if cfg.time_constants != "tied" else []) + ([0.0] if reach_delays(cfg) else [])
     parts.append(jnp.array(timing, theta1.dtype))
     return jnp.concatenate(parts)
+
+
+def stage2_tau_start(theta0: np.ndarray, cfg: Config) -> np.ndarray:
+    """``theta0`` (S, p) of :func:`stage2_start` with the Arimoto planner's fitted ``τ/T`` at
+    ``START_TAU_FRACTION`` (the other cases unchanged)."""
+    if cfg.model != "lambda0" or cfg.time_constants != "fractions":
+        return theta0
+    theta0 = np.array(theta0, float)
+    theta0[:, n_params(cfg) - n_timing(cfg)] = math.log(START_TAU_FRACTION)
+    return theta0
 
 
 def model_and_planner(chain, p: dict, duration, cfg: Config, offsets=None, t_ratio=None):
