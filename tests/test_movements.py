@@ -15,6 +15,7 @@ Compile budget: one fit (stage 1, the gauge, stage 2, the integration check) and
 (whose simulation the rebuilt objective reuses).
 """
 
+import dataclasses
 import math
 
 import jax.numpy as jnp
@@ -112,6 +113,26 @@ def test_held_out_final_postures_and_paths(case):
     assert np.all(np.diff(pr.t[:, 0]) > 0) and pr.t[0, 0] >= test.t[0]
     pinv = pr.baselines["pinv_minjerk"]["rmse_deg"]
     assert np.median(pr.rmse_deg) < 1.0 and np.median(pr.rmse_deg) <= 0.5 * np.median(pinv), (pr.rmse_deg, pinv)
+
+
+def test_predictions_simulate_failed_reaches_again_at_more_steps(case, monkeypatch):
+    # A reach whose simulation fails at the fit's steps (NONFINITE, as a Donders-fitted model's can:
+    # it has no integration check) is simulated again at twice the steps: stand-in failures at the
+    # fit's step count give the predictions of the same fit reporting twice its steps.
+    _, fit, test, _ = case
+    expected = fitting.predict_movements(dataclasses.replace(fit, steps_per_sample=2 * fit.steps_per_sample), [test])
+    real = mdl.simulate
+
+    def failing(chain, model, planner, q0, target, steps, solver):
+        tr = real(chain, model, planner, q0, target, steps, solver)
+        if steps != fit.steps_per_sample:
+            return tr
+        return dataclasses.replace(tr, q=tr.q * jnp.nan, status=jnp.full_like(tr.status, int(pj.Status.NONFINITE)))
+
+    monkeypatch.setattr(mdl, "simulate", failing)
+    pr = fitting.predict_movements(fit, [test])
+    assert np.all(pr.status == 0) and np.all(expected.status == 0)
+    np.testing.assert_allclose(pr.q_pred, expected.q_pred, rtol=0, atol=1e-12)
 
 
 BATCH = 10  # reaches per simulation: the held-out trial's, so predict_movements' compiled simulation serves

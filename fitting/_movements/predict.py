@@ -127,7 +127,8 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
     At the fit's solver and steps; with RK4, at the fewest steps stable at each reach's start
     (``model.stable_rk4_steps``, from the fit's), and reaches too stiff for RK4 even then by RODAS4
     at those steps. Reaches whose error estimate is above ``simulate``'s tolerance (``INACCURATE``)
-    are simulated again at twice the steps, up to three times."""
+    or whose simulation failed (``NONFINITE``: a Donders-fitted model has no integration check of
+    its steps) are simulated again at twice the steps, up to three times."""
     steps = fit.steps_per_sample
     solvers = np.full(len(sr), fit.solver)
     if fit.solver == "rk4":
@@ -148,7 +149,7 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
                 tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], at, str(solver))
                 q[rows[redo]] = np.asarray(tr.q)[redo]
                 status[rows[redo]] = np.asarray(tr.status).astype(int)[redo]
-                redo = status[rows] == int(Status.INACCURATE)
+                redo = np.isin(status[rows], (int(Status.INACCURATE), int(Status.NONFINITE)))
                 if not redo.any():
                     break
                 at *= 2
@@ -163,7 +164,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
     step count (RK4: more steps where a reach's start posture needs them to stay stable), and at
     twice, four or eight times the steps where ``simulate``'s error estimate calls the reach
-    ``INACCURATE``.
+    ``INACCURATE`` or the simulation is not finite.
 
     **Arguments:**
 
