@@ -114,9 +114,11 @@ every variant converged on all four subjects, every λ0-PMP variant's pooled med
 within 0.003° of the table above and its Wilcoxon results against pinv_minjerk the same (the
 Arimoto variants at one RODAS4 step per sample, or two where the refinement asked for them);
 wall per variant 42–266 s (was 44–1 118 s). The Donders-only model, which has no integration
-check, was simulated at one step per sample: 6 of S01's 73 held-out motions failed (the first
-steps diverge at ``τ = T/5``), so the table above stays the shipped one, and the predictions now
-simulate a failed reach again at twice the steps, as they did an inaccurate one.
+check, was simulated from one step per sample: 6 of S01's 73 held-out motions stayed
+``INACCURATE`` at the eight times as many steps the predictions then tried (before: from two
+steps, up to 16), so the table above stays the shipped one. The predictions now double up to
+16 times the fit's steps (S01's Donders-only model then predicts all 73, median 16.1° as in the
+table), and also simulate again a reach whose simulation is not finite.
 """
 
 from __future__ import annotations

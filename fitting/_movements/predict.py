@@ -128,7 +128,7 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
     (``model.stable_rk4_steps``, from the fit's), and reaches too stiff for RK4 even then by RODAS4
     at those steps. Reaches whose error estimate is above ``simulate``'s tolerance (``INACCURATE``)
     or whose simulation failed (``NONFINITE``: a Donders-fitted model has no integration check of
-    its steps) are simulated again at twice the steps, up to three times."""
+    its steps) are simulated again at twice the steps, up to four times."""
     steps = fit.steps_per_sample
     solvers = np.full(len(sr), fit.solver)
     if fit.solver == "rk4":
@@ -145,7 +145,7 @@ def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
         with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
             (model, planner), _ = subject_model(fit, subject, sr.duration[rows], sr.t_ratio[rows])
             at, redo = steps, np.ones(len(rows), bool)
-            for _ in range(4):  # (the fit's steps, then twice, four and eight times as many)
+            for _ in range(5):  # (the fit's steps, then 2, 4, 8 and 16 times as many)
                 tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], at, str(solver))
                 q[rows[redo]] = np.asarray(tr.q)[redo]
                 status[rows[redo]] = np.asarray(tr.status).astype(int)[redo]
@@ -163,7 +163,7 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
     segmented recordings) is simulated from its recorded start posture to
     the hand position of its recorded end, over its recorded duration, at the fit's solver and
     step count (RK4: more steps where a reach's start posture needs them to stay stable), and at
-    twice, four or eight times the steps where ``simulate``'s error estimate calls the reach
+    2, 4, 8 or 16 times the steps where ``simulate``'s error estimate calls the reach
     ``INACCURATE`` or the simulation is not finite.
 
     **Arguments:**

@@ -173,7 +173,7 @@ def _status_from(traj_status):
 def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
     """Simulate rows (R,) with ``solver`` at ``steps`` per sample (RK4: at least, more if needed to
     keep it well inside its stability bound; rows the error estimate flags ``INACCURATE``, or whose
-    simulation is not finite, again at twice the steps, up to three times); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
+    simulation is not finite, again at twice the steps, up to four times); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
     ``status`` (R,) as ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
@@ -195,8 +195,8 @@ def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
         q0, target = np.asarray(q0)[good], np.asarray(target)[good]
     traj = _simulate(model, planner, q0, target, steps, solver)
     q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
-    # Rows whose error estimate asks for it, or that failed, are simulated again at twice the steps (up to 8x).
-    for _ in range(3):
+    # Rows whose error estimate asks for it, or that failed, are simulated again at twice the steps (up to 16x).
+    for _ in range(4):
         redo = np.isin(status, (int(Status.INACCURATE), int(Status.NONFINITE)))
         if not redo.any():
             break
