@@ -118,7 +118,8 @@ check, was simulated from one step per sample: 6 of S01's 73 held-out motions st
 ``INACCURATE`` at the eight times as many steps the predictions then tried (before: from two
 steps, up to 16), so the table above stays the shipped one. The predictions now double up to
 16 times the fit's steps (S01's Donders-only model then predicts all 73, median 16.1° as in the
-table), and also simulate again a reach whose simulation is not finite.
+table), and also simulate again a reach whose simulation is not finite; the Donders-fitted model
+simulates at two steps per sample again (``DONDERS_STEPS_PER_SAMPLE``), as in the table.
 """
 
 from __future__ import annotations

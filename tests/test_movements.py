@@ -117,10 +117,11 @@ def test_held_out_final_postures_and_paths(case):
 
 def test_predictions_simulate_failed_reaches_again_at_more_steps(case, monkeypatch):
     # A reach whose simulation fails at the fit's steps (NONFINITE, as a Donders-fitted model's can:
-    # it has no integration check) is simulated again at twice the steps: stand-in failures at the
-    # fit's step count give the predictions of the same fit reporting twice its steps.
+    # it has no integration check) is simulated again at twice the steps: with stand-in failures at
+    # the fit's step count every reach is predicted, within 0.01° of the predictions without them
+    # (the fit's integration error at its steps is below that).
     _, fit, test, _ = case
-    expected = fitting.predict_movements(dataclasses.replace(fit, steps_per_sample=2 * fit.steps_per_sample), [test])
+    expected = fitting.predict_movements(fit, [test])
     real = mdl.simulate
 
     def failing(chain, model, planner, q0, target, steps, solver):
@@ -132,7 +133,7 @@ def test_predictions_simulate_failed_reaches_again_at_more_steps(case, monkeypat
     monkeypatch.setattr(mdl, "simulate", failing)
     pr = fitting.predict_movements(fit, [test])
     assert np.all(pr.status == 0) and np.all(expected.status == 0)
-    np.testing.assert_allclose(pr.q_pred, expected.q_pred, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.rad2deg(pr.q_pred), np.rad2deg(expected.q_pred), rtol=0, atol=0.01)
 
 
 BATCH = 10  # reaches per simulation: the held-out trial's, so predict_movements' compiled simulation serves

@@ -78,6 +78,9 @@ INTEGRATION_TOL_DEG = 0.01
 #: optima of the four HuG-MP subjects, and each doubling doubles a fit's cost.
 STEPS_PER_SAMPLE = 1
 MAX_STEPS_PER_SAMPLE = 32
+#: A Donders-fitted model (no stage 2, so no integration check at the optimum) simulates at two:
+#: from one, 6 of S01's 73 held-out motions need 16 steps per sample for simulate's estimate.
+DONDERS_STEPS_PER_SAMPLE = 2
 #: RK4 (the time-base generator) starts from at least this many steps, and may start at more
 #: steps than the refinement's RODAS4.
 RK4_STEPS_PER_SAMPLE = 2
@@ -580,6 +583,8 @@ def _fit(chain, subjects: list[SubjectReaches], cfg: mdl.Config, ms, margin_deg:
     lm2 = np.zeros(S, int)
     if ms[1] == 0 and out["stage1"] is not None:
         s1 = out["stage1"]
+        if not fixed_steps and not rk4:
+            steps = max(steps, DONDERS_STEPS_PER_SAMPLE)
         if identify:
             sv, V0 = jax.device_get(_identifiability(theta0, data, chain, cfg=jcfg, steps=steps, solver=solver))
         else:
