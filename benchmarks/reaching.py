@@ -120,6 +120,10 @@ steps, up to 16), so the table above stays the shipped one. The predictions now 
 16 times the fit's steps (S01's Donders-only model then predicts all 73, median 16.1° as in the
 table), and also simulate again a reach whose simulation is not finite; the Donders-fitted model
 simulates at two steps per sample again (``DONDERS_STEPS_PER_SAMPLE``), as in the table.
+Since 2026-12-06 20:40 UTC the predictions simulate every reach by RODAS4 with adaptive steps
+(``simulate``'s default tolerances) instead of doubling fixed steps: on S01's 73 held-out motions
+(default fit) the fitted model's and the baselines' predictions are within 0.0008° of the doubling
+scheme's, all ``SUCCESSFUL``, median held-out RMSE 5.57°; the table is not rerun.
 """
 
 from __future__ import annotations

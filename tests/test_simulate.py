@@ -168,7 +168,9 @@ def test_save_modes_agree_at_shared_steps():
     assert every.q.shape == (2, 401, 3) and tenth.q.shape == (2, 41, 3)
     np.testing.assert_allclose(every.t, np.arange(401) * 1e-3, atol=1e-15)
     for f in FIELDS:
-        np.testing.assert_allclose(getattr(tenth, f), getattr(every, f)[:, ::10], rtol=0, atol=1e-13)
+        # (1e-9: the second movement starts at a singular posture, which amplifies the rounding
+        # differences of two compiled programs; a sample of the wrong step differs by > 1e-5)
+        np.testing.assert_allclose(getattr(tenth, f), getattr(every, f)[:, ::10], rtol=1e-8, atol=1e-9)
     np.testing.assert_array_equal(every.status, [pj.Status.SUCCESSFUL, pj.Status.SINGULAR])
     np.testing.assert_array_equal(tenth.status, every.status)
     q, qd = np.asarray(every.q[0]), np.asarray(every.qdot[0])

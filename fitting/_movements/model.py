@@ -231,10 +231,13 @@ def reach_damping(p: dict, duration, cfg: Config, t_ratio=None):
     return scale, tau0, tau0[:, None, None] * p["W"][None]
 
 
-def simulate(chain, model, planner, q0, target, steps: int, solver: str):
-    """``pmpjax.simulate`` on normalised time, saved at the ``SAMPLES`` samples."""
-    return pj.simulate(model, planner, q0, target, duration=1.0, dt=1.0 / ((SAMPLES - 1) * steps),
-                       saveat=pj.SaveAt(ts=SAMPLE_TIMES), solver=solver)
+def simulate(chain, model, planner, q0, target, steps: int | None, solver: str):
+    """``pmpjax.simulate`` on normalised time, saved at the ``SAMPLES`` samples: ``steps`` equal
+    steps per sample interval, or adaptive steps (``None``: ``simulate``'s PI controller at its
+    default tolerances)."""
+    dt = None if steps is None else 1.0 / ((SAMPLES - 1) * steps)
+    return pj.simulate(model, planner, q0, target, duration=1.0, dt=dt, saveat=pj.SaveAt(ts=SAMPLE_TIMES),
+                       solver=solver)
 
 
 def bound_residual(theta, data, cfg: Config):

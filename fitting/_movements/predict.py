@@ -28,7 +28,7 @@ from .data import (
     skipped_summary,
     subject_reaches,
 )
-from .fit import MAX_RK4_STEPS_PER_SAMPLE, MovementFit, _fit_config, _fk, _start_rates, subject_model
+from .fit import MovementFit, _fk, subject_model
 
 BASELINES = ("pinv_minjerk", "joint_minjerk_oracle")
 
@@ -124,36 +124,14 @@ def _errors(q_pred, q_obs, status):
 
 def _simulate_reaches(fit: MovementFit, subject: str, sr, target):
     """The fitted subject's reaches ``sr`` to ``target`` (B, m): ``q`` (B, S, n), ``status`` (B,).
-    At the fit's solver and steps; with RK4, at the fewest steps stable at each reach's start
-    (``model.stable_rk4_steps``, from the fit's), and reaches too stiff for RK4 even then by RODAS4
-    at those steps. Reaches whose error estimate is above ``simulate``'s tolerance (``INACCURATE``)
-    or whose simulation failed (``NONFINITE``: a Donders-fitted model has no integration check of
-    its steps) are simulated again at twice the steps, up to four times."""
-    steps = fit.steps_per_sample
-    solvers = np.full(len(sr), fit.solver)
-    if fit.solver == "rk4":
-        cfg = _fit_config(fit)
-        data = dict(duration=sr.duration[None], t_ratio=sr.t_ratio[None], q_start=sr.q_start[None],
-                    weight=np.ones((1, len(sr))))
-        rates = np.asarray(_start_rates(fit.params[fit.subject_index(subject)][None], data, fit.chain, cfg=cfg))[0]
-        steps = mdl.stable_rk4_steps(rates, steps, MAX_RK4_STEPS_PER_SAMPLE)
-        solvers[~mdl.rk4_stable(rates, steps)] = "rodas4"
-    q = np.full(sr.q_obs.shape, np.nan)
-    status = np.zeros(len(sr), int)
-    for solver in np.unique(solvers):
-        rows = np.flatnonzero(solvers == solver)
-        with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
-            (model, planner), _ = subject_model(fit, subject, sr.duration[rows], sr.t_ratio[rows])
-            at, redo = steps, np.ones(len(rows), bool)
-            for _ in range(5):  # (the fit's steps, then 2, 4, 8 and 16 times as many)
-                tr = mdl.simulate(fit.chain, model, planner, sr.q_start[rows], target[rows], at, str(solver))
-                q[rows[redo]] = np.asarray(tr.q)[redo]
-                status[rows[redo]] = np.asarray(tr.status).astype(int)[redo]
-                redo = np.isin(status[rows], (int(Status.INACCURATE), int(Status.NONFINITE)))
-                if not redo.any():
-                    break
-                at *= 2
-    return q, status
+    RODAS4 with adaptive steps (``simulate``'s PI controller at its default tolerances), whatever
+    the fit's solver and steps: every reach is within ``simulate``'s tolerance (``SUCCESSFUL``) or
+    says why not (``MAX_STEPS``, ``NONFINITE``, ``SINGULAR``), stiff or not, and one compilation
+    serves every step count (a Donders-fitted model has no integration check of its own)."""
+    with without_unit_checks():  # (fitted values: a reach that fails says so by its status)
+        (model, planner), _ = subject_model(fit, subject, sr.duration, sr.t_ratio)
+        tr = mdl.simulate(fit.chain, model, planner, sr.q_start, target, None, "rodas4")
+    return np.asarray(tr.q), np.asarray(tr.status).astype(int)
 
 
 def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None = None) -> MovementPrediction:
@@ -161,10 +139,9 @@ def predict_movements(fit: MovementFit, recordings, *, find_options: dict | None
 
     Each reach (found as in :func:`fit_movements`; each recording one motion for a fit of
     segmented recordings) is simulated from its recorded start posture to
-    the hand position of its recorded end, over its recorded duration, at the fit's solver and
-    step count (RK4: more steps where a reach's start posture needs them to stay stable), and at
-    2, 4, 8 or 16 times the steps where ``simulate``'s error estimate calls the reach
-    ``INACCURATE`` or the simulation is not finite.
+    the hand position of its recorded end, over its recorded duration, by RODAS4 with adaptive
+    steps at ``simulate``'s default tolerances (whatever the fit's solver and steps: each reach is
+    within that tolerance, or its status says why not).
 
     **Arguments:**
 

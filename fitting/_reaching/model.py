@@ -48,15 +48,10 @@ from pmpjax.internal import fast_compile_jit, row_chunks
 
 from .._movements import BOUND_WIDTH as _BOUND_WIDTH
 from .._movements import GAIN_CAP as _GAIN_CAP
-from .._movements import ReachModelConfig, rk4_rates, stable_rk4_steps, stage2_start, unpack_params
+from .._movements import ReachModelConfig, rk4_rates, stage2_start, unpack_params
 from .._optimise import sym_index
 from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
 
-#: RK4 steps per 1/49 of normalised time at most, in ``predict_reaching``'s RK4 baselines.
-MAX_STEPS_PER_SAMPLE = 160
-#: RODAS4 steps per sample of the unfitted λ0-PMP baseline (the fits choose and check their own:
-#: ``fitting._movements.fit``).
-ROSENBROCK_STEPS = 2
 #: Largest ``integration_error_deg`` a fit accepts silently (a warning above).
 INTEGRATION_TOL_DEG = 0.01
 #: Default bound on cond(KJ) (``fit_reaching(stiffness_cond_max=)``).
@@ -187,12 +182,10 @@ def _rates_host(KJ, W, tau0, q0, *, minjerk: bool):
     return _host_rows(lambda *a: _rates_jit(*a, minjerk=minjerk), KJ, W, tau0, q0)
 
 
-def _simulate(model, planner, q0, target, steps: int, solver: str):
-    """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` steps each."""
-    return pj.simulate(model, planner, q0, target, duration=1.0, dt=1.0 / ((SAMPLES - 1) * steps),
-                       saveat=pj.SaveAt(ts=_SAMPLE_TIMES), solver=solver)
+def _simulate(model, planner, q0, target, steps: int | None, solver: str):
+    """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` steps each
+    (``None``: adaptive steps at ``simulate``'s default tolerances)."""
+    dt = None if steps is None else 1.0 / ((SAMPLES - 1) * steps)
+    return pj.simulate(model, planner, q0, target, duration=1.0, dt=dt, saveat=pj.SaveAt(ts=_SAMPLE_TIMES),
+                       solver=solver)
 
-
-def _stability_steps(rates, minimum):
-    """``fitting._movements``' ``stable_rk4_steps`` up to this module's ``MAX_STEPS_PER_SAMPLE``."""
-    return stable_rk4_steps(rates, minimum, MAX_STEPS_PER_SAMPLE)

@@ -26,12 +26,10 @@ from pmpjax.internal import pad_rows, without_unit_checks
 from .fit import ReachingFit
 from .model import (
     GAIN_CAP,
-    ROSENBROCK_STEPS,
     _Config,
     _model_and_planner,
     _rates_host,
     _simulate,
-    _stability_steps,
     _unpack_host,
 )
 from .motions import (
@@ -170,20 +168,17 @@ def _status_from(traj_status):
     return np.asarray(traj_status).astype(int)  # pmpjax.Status codes
 
 
-def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
-    """Simulate rows (R,) with ``solver`` at ``steps`` per sample (RK4: at least, more if needed to
-    keep it well inside its stability bound; rows the error estimate flags ``INACCURATE``, or whose
-    simulation is not finite, again at twice the steps, up to four times); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3),
-    ``status`` (R,) as ``pmpjax.Status`` codes."""
+def _simulate_rows(model, planner, q0, target):
+    """Simulate rows (R,) by RODAS4 with adaptive steps (``simulate``'s PI controller at its
+    default tolerances: every row within that tolerance, or its status says why not; one
+    compilation per model); returns ``q`` (R, 50, 4), ``x`` (R, 50, 3), ``status`` (R,) as
+    ``pmpjax.Status`` codes."""
     minjerk = isinstance(planner, pj.MinimumJerkPlanner)
     KJ = model.KJ if model.KJ is not None else np.zeros(np.shape(model.W))
     tau0 = planner.tau0 if not minjerk else np.ones(len(q0))
-    rates = _rates_host(KJ, model.W, tau0, q0, minjerk=minjerk)
-    if solver == "rk4":
-        steps = _stability_steps(rates, steps)
-    # rows that are singular at q0 or (RK4) too stiff even at the most steps: SINGULAR, NaN
-    # (simulated as a copy of a good row, since pmpjax.simulate refuses the whole batch)
-    bad = ~np.isfinite(rates) | ((solver == "rk4") & (rates / ((SAMPLES - 1) * steps) > 2.4))
+    # rows singular at q0: SINGULAR, NaN (simulated as a copy of a good row, since
+    # pmpjax.simulate refuses the whole batch)
+    bad = ~np.isfinite(_rates_host(KJ, model.W, tau0, q0, minjerk=minjerk))
     R_ = len(q0)
     if bad.all():
         nan = np.full((R_, SAMPLES), np.nan)
@@ -193,17 +188,8 @@ def _simulate_rows(model, planner, q0, target, solver: str, steps: int):
         take = lambda a: a[good] if np.ndim(a) >= 1 and np.shape(a)[0] == R_ else a  # noqa: E731
         model, planner = jax.tree_util.tree_map(take, (model, planner))
         q0, target = np.asarray(q0)[good], np.asarray(target)[good]
-    traj = _simulate(model, planner, q0, target, steps, solver)
+    traj = _simulate(model, planner, q0, target, None, "rodas4")
     q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
-    # Rows whose error estimate asks for it, or that failed, are simulated again at twice the steps (up to 16x).
-    for _ in range(4):
-        redo = np.isin(status, (int(Status.INACCURATE), int(Status.NONFINITE)))
-        if not redo.any():
-            break
-        steps *= 2
-        traj = _simulate(model, planner, q0, target, steps, solver)
-        q[redo], x[redo] = np.asarray(traj.q)[redo], np.asarray(traj.x)[redo]
-        status[redo] = _status_from(traj.status)[redo]
     q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
     return q, x, status
 
@@ -286,19 +272,18 @@ def predict_reaching(fit: ReachingFit, *, reps=(8, 9, 10)) -> ReachingPrediction
     planner_u = pj.ArimotoPlanner(k=None, tau=tau0_u, tau0=tau0_u)
     two = lambda a: np.concatenate([a, a])  # noqa: E731
     if cfg.model == "lambda0":
-        q2, x2, s2 = _simulate_rows(_concat(model, model_u), _concat(planner, planner_u), two(q0), two(target),
-                                    fit.solver, fit.steps_per_sample)
+        q2, x2, s2 = _simulate_rows(_concat(model, model_u), _concat(planner, planner_u), two(q0), two(target))
         (qm, qu), (xm, xu), (sm, su) = np.split(q2, 2), np.split(x2, 2), np.split(s2, 2)
     else:
-        qm, xm, sm = _simulate_rows(model, planner, q0, target, fit.solver, fit.steps_per_sample)
-        qu, xu, su = _simulate_rows(model_u, planner_u, q0, target, "rodas4", ROSENBROCK_STEPS)
+        qm, xm, sm = _simulate_rows(model, planner, q0, target)
+        qu, xu, su = _simulate_rows(model_u, planner_u, q0, target)
 
     # straight hand path, minimum-jerk timing: PMP1 (q̇ = J#_W ẋ) under the time-base generator
     W_ik = np.stack([np.diag(fit.ik_weights[a]) for a in own])
     ik_ok = np.all(np.isfinite(W_ik.reshape(Bp, -1)), axis=-1)
     W_ik = np.where(ik_ok[:, None, None], W_ik, eye)
     mj = pj.MinimumJerkPlanner(duration=np.ones(2 * Bp), gain_cap=GAIN_CAP)
-    q2, x2, s2 = _simulate_rows(pj.PMP1(chain, W=np.concatenate([eye, W_ik])), mj, two(q0), two(target), "rk4", 2)
+    q2, x2, s2 = _simulate_rows(pj.PMP1(chain, W=np.concatenate([eye, W_ik])), mj, two(q0), two(target))
     (qp, qi), (xp, xi), (sp_, si) = np.split(q2, 2), np.split(x2, 2), np.split(s2, 2)
     si = np.where(ik_ok, si, int(Status.INVALID_INPUT))
     s = np.asarray(_SAMPLE_TIMES)
