@@ -14,7 +14,7 @@ from .model import bound_residual as bound_residual
 from .model import free_index as free_index
 from .model import n_params as n_params
 from .model import rk4_rates as rk4_rates
-from .model import stable_rk4_steps as stable_rk4_steps
+from .model import simulate as simulate_samples  # noqa: F401
 from .model import stage2_start as stage2_start
 from .model import unpack as unpack_params  # noqa: F401
 from .plots import plot_movement_parameters as plot_movement_parameters

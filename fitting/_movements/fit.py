@@ -78,8 +78,9 @@ INTEGRATION_TOL_DEG = 0.01
 #: optima of the four HuG-MP subjects, and each doubling doubles a fit's cost.
 STEPS_PER_SAMPLE = 1
 MAX_STEPS_PER_SAMPLE = 32
-#: A Donders-fitted model (no stage 2, so no integration check at the optimum) simulates at two:
-#: from one, 6 of S01's 73 held-out motions need 16 steps per sample for simulate's estimate.
+#: A Donders-fitted model (no stage 2, so no integration check at the optimum) keeps two steps per
+#: sample for its identifiability (from one, 6 of S01's 73 held-out motions needed 16 for
+#: simulate's estimate; predictions choose their own steps).
 DONDERS_STEPS_PER_SAMPLE = 2
 #: RK4 (the time-base generator) starts from at least this many steps, and may start at more
 #: steps than the refinement's RODAS4.

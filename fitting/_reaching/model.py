@@ -50,7 +50,7 @@ from .._movements import BOUND_WIDTH as _BOUND_WIDTH
 from .._movements import GAIN_CAP as _GAIN_CAP
 from .._movements import ReachModelConfig, rk4_rates, stage2_start, unpack_params
 from .._optimise import sym_index
-from .motions import _SAMPLE_TIMES, JOINTS, SAMPLES, _chain
+from .motions import JOINTS, _chain
 
 #: Largest ``integration_error_deg`` a fit accepts silently (a warning above).
 INTEGRATION_TOL_DEG = 0.01
@@ -180,12 +180,4 @@ def _rates_host(KJ, W, tau0, q0, *, minjerk: bool):
     (R, 4, 4), as NumPy (one compile per ``minjerk``)."""
     KJ = np.broadcast_to(np.asarray(KJ, float), np.shape(W))
     return _host_rows(lambda *a: _rates_jit(*a, minjerk=minjerk), KJ, W, tau0, q0)
-
-
-def _simulate(model, planner, q0, target, steps: int | None, solver: str):
-    """``pmpjax.simulate`` on normalised time, saved at the 50 samples, ``steps`` steps each
-    (``None``: adaptive steps at ``simulate``'s default tolerances)."""
-    dt = None if steps is None else 1.0 / ((SAMPLES - 1) * steps)
-    return pj.simulate(model, planner, q0, target, duration=1.0, dt=dt, saveat=pj.SaveAt(ts=_SAMPLE_TIMES),
-                       solver=solver)
 

@@ -23,13 +23,13 @@ import pmpjax as pj
 from pmpjax import Status, status_message
 from pmpjax.internal import pad_rows, without_unit_checks
 
+from .._movements import simulate_samples
 from .fit import ReachingFit
 from .model import (
     GAIN_CAP,
     _Config,
     _model_and_planner,
     _rates_host,
-    _simulate,
     _unpack_host,
 )
 from .motions import (
@@ -188,7 +188,7 @@ def _simulate_rows(model, planner, q0, target):
         take = lambda a: a[good] if np.ndim(a) >= 1 and np.shape(a)[0] == R_ else a  # noqa: E731
         model, planner = jax.tree_util.tree_map(take, (model, planner))
         q0, target = np.asarray(q0)[good], np.asarray(target)[good]
-    traj = _simulate(model, planner, q0, target, None, "rodas4")
+    traj = simulate_samples(model.chain, model, planner, q0, target, None, "rodas4")
     q, x, status = np.asarray(traj.q).copy(), np.asarray(traj.x).copy(), _status_from(traj.status)
     q[bad], x[bad], status[bad] = np.nan, np.nan, int(Status.SINGULAR)
     return q, x, status
