@@ -44,6 +44,9 @@ REST_AVERAGE = 0.05
 #: onset/offset level as a fraction of the peak speed (options ``smoothing``, ``onset``).
 SEGMENTED_SMOOTHING = 5e-6
 SEGMENTED_ONSET = 0.2
+#: A segmented recording whose smoothed hand speed never exceeds this [task units/s: m/s on the
+#: arms] is skipped (nothing moves; the smoothing spline's rounding, ~1e-13, is no movement).
+SEGMENTED_MIN_PEAK_SPEED = 1e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +141,8 @@ def segmented_reaches(subject: str, recordings: Sequence, chain, options: dict) 
     time. ``options``: ``onset`` (fraction of the peak speed, default ``SEGMENTED_ONSET``) and
     ``smoothing`` (``pmpjax.smooth_path``'s λ; None: GCV per motion; default
     ``SEGMENTED_SMOOTHING``). Recordings whose speed never falls below the level on one side
-    (cut by the recording), or with fewer than 5 samples, are skipped with the reason."""
+    (cut by the recording) or never exceeds ``SEGMENTED_MIN_PEAK_SPEED``, or with fewer than 5
+    samples, are skipped with the reason."""
     options = check_find_options(options, True)
     level = float(options.get("onset", SEGMENTED_ONSET))
     lam = options.get("smoothing", SEGMENTED_SMOOTHING)
@@ -154,6 +158,10 @@ def segmented_reaches(subject: str, recordings: Sequence, chain, options: dict) 
             continue
         x = np.asarray(hand_positions(chain, q))
         path = pj.smooth_path(t, x, lam=None if lam is None else float(lam))
+        if not float(np.max(path.speed)) > SEGMENTED_MIN_PEAK_SPEED:
+            skipped.append((rec.name, float(t[0]), float(t[-1]),
+                            f"hand speed never exceeds {SEGMENTED_MIN_PEAK_SPEED:g} (nothing moves)"))
+            continue
         a, b = pj.segment_by_speed(path.speed, threshold=level)
         if a is None or b is None:
             side = "onset" if a is None else "offset"
