@@ -602,13 +602,25 @@ def fit_cost(args):
     one = fit.subjects[k]
     if S > 1:
         fitting.fit_reaching([one], **kw)
+    # the same fit by fit_reaching's engine, stage-2 steps from approximate Jacobians (the default)
+    # and from exact ones throughout: the approximation's gain, and the iterations that
+    # Levenberg–Marquardt with exact derivatives needs (those the SciPy loop is extrapolated with)
+    cfg = R.ReachingConfig(fit.model, fit.damping, fit.time_constants, 5, cond_max=fit.stiffness_cond_max)
+    engine = {True: [], False: []}
+    mkw = dict(max_steps=kw["max_steps"]) if "max_steps" in kw else {}
+    for approximate in (True, False):
+        R.fit_reaching_motions([m], cfg, approximate=approximate, **mkw)
     jax_clocks, slow = [], []
     for r in range(args.rounds):
-        log(f"round {r + 1}/{args.rounds}: fit_reaching([{one!r}]), a residual call of the baseline and of the "
-            "slow reference ...")
+        log(f"round {r + 1}/{args.rounds}: fit_reaching([{one!r}]), its engine with approximate and with exact "
+            "Jacobians, a residual call of the baseline and of the slow reference ...")
         with bl.CpuClock() as clk:
             single = fitting.fit_reaching([one], **kw)
         jax_clocks.append(clk)
+        for approximate in (True, False):
+            with bl.CpuClock() as clk:
+                out = R.fit_reaching_motions([m], cfg, approximate=approximate, **mkw)
+            engine[approximate].append((clk, int(out["steps2"][0]), out["x"][0]))
         with bl.CpuClock() as clk:
             residual_np(theta_star, m.q_obs, m.t_ratio, elbow)
         calls.append(clk)
@@ -626,6 +638,17 @@ def fit_cost(args):
     cpu_per_eval = min(c.thread_cpu for c in calls)  # the loop's thread (others: the JAX runtime's)
     per_slow = min(c.wall for c in slow)
     it = int(single.lm_steps[0][1])
+    it_exact = engine[False][0][1]
+    eng = {a: min(v, key=lambda e: e[0].wall)[0] for a, v in engine.items()}
+    x_a, x_e = engine[True][0][2], engine[False][0][2]
+    se = np.asarray(fit.stderr[k], float)
+    res["jax"].update(engine_approximate_s=eng[True].wall, engine_exact_s=eng[False].wall,
+                      engine_approximate_iterations=engine[True][0][1], engine_exact_iterations=it_exact,
+                      engine_exact_over_approximate=eng[False].wall / eng[True].wall,
+                      optima_apart_max_se=float(np.max(np.abs(x_a - x_e) / se)))
+    log(f"  engine: approximate {eng[True].wall:.2f} s ({engine[True][0][1]} iterations), exact "
+        f"{eng[False].wall:.2f} s ({it_exact}); optima {res['jax']['optima_apart_max_se']:.4f} SE apart")
+    it = it_exact  # Levenberg–Marquardt with exact derivatives (SciPy's 2-point Jacobian: ~1e-8)
     extrap = per_eval * (p + 1) * max(it, 1)
     extrap_cpu = cpu_per_eval * (p + 1) * max(it, 1)
     extrap_slow = per_slow * (p + 1) * max(it, 1)
@@ -652,6 +675,7 @@ def fit_cost(args):
         f"fit_reaching, {m.subject} alone": dict(cores=clk_one.cores, threads=clk_one.threads),
         f"fit_reaching, {S} subjects (run)": dict(cores=clk_warm.cores, threads=clk_warm.threads)}
     res["ratios"] = {f"{m.subject}: SciPy loop / fit_reaching (run)": extrap / single_s,
+                     f"{m.subject}: engine, exact / approximate Jacobians": eng[False].wall / eng[True].wall,
                      f"{m.subject}: SciPy loop / fit_reaching, CPU time": extrap_cpu / jax_cpu,
                      f"{m.subject}: slow reference SciPy loop / fit_reaching (run)": extrap_slow / single_s}
     if S > 1:
@@ -664,8 +688,12 @@ def fit_cost(args):
     print(f"\n| | compile [s] | run [s] | per subject [s] | cores | load |\n|---|---:|---:|---:|---:|---:|\n"
           f"| fit_reaching, {S} subjects ({fit.solver} ×{fit.steps_per_sample}) | {comp:.0f} | {warm:.0f} | "
           f"{warm / S:.1f} | {clk_warm.cores:.2f} | {res['jax']['load']:.1f} |\n"
-          f"| fit_reaching, {m.subject} alone ({it} stage-2 iterations) | — | {single_s:.1f} | {single_s:.1f} | "
-          f"{clk_one.cores:.2f} | |\n"
+          f"| fit_reaching, {m.subject} alone ({single.lm_steps[0][1]} stage-2 iterations) | — | {single_s:.1f} | "
+          f"{single_s:.1f} | {clk_one.cores:.2f} | |\n"
+          f"| its engine, approximate then exact Jacobians ({engine[True][0][1]} iterations) | — | "
+          f"{eng[True].wall:.1f} | | {eng[True].cores:.2f} | |\n"
+          f"| its engine, exact Jacobians throughout ({it_exact} iterations) | — | {eng[False].wall:.1f} | | "
+          f"{eng[False].cores:.2f} | |\n"
           f"| SciPy loop, {m.subject} (extrapolated: {per_eval:.2f} s × {p + 1} × {it} iterations) | — | — | "
           f"{extrap:.0f} | {cores_scipy:.2f} | {sc['load']:.1f} |\n"
           f"| slow reference SciPy loop ({per_slow:.2f} s per residual, {per_slow / per_eval:.2f}×) | — | — | "

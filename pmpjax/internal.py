@@ -82,6 +82,7 @@ from ._pmp.redundancy import pinv_diag_lists as pinv_diag_lists
 # simulate's RK4 step check, for callers that trace simulate inside their own kernels (skipped there)
 from ._pmp.simulate import check_rk4_stability as check_rk4_stability
 from ._pmp.simulate import forward_jacobians as forward_jacobians
+from ._pmp.simulate import frozen_tangents as frozen_tangents
 
 # Springy arm: argument checks, the per-item gravity equilibrium, and the batched MJX rollout
 # behind ``rollout(..., backend="mjx")`` with its scripted controller and parked probe

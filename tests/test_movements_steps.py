@@ -33,7 +33,7 @@ def stand_ins(monkeypatch, error_at, p, calls):
                     cost=np.ones(S), start=np.zeros((S, p)), weight=np.asarray(data["weight"]),
                     jac=np.zeros((S, 1, theta0.shape[1])))
 
-    def stage2(x, data, chain, max_steps, *, cfg, steps, solver):
+    def stage2(x, data, chain, max_steps, *, cfg, steps, solver, approximate=True):
         names = [n for n, q in zip(error_at, subjects_q)
                  if any(np.array_equal(q, d[: len(q)]) for d in np.asarray(data["q_obs"]))]
         calls.append((tuple(names), steps))

@@ -97,6 +97,48 @@ def test_status_max_steps_and_nonfinite():
     assert int(r.status) == pj.Status.NONFINITE and not bool(r.converged)
 
 
+def test_approximate_jacobian_steps_end_at_the_exact_optimum():
+    """``approximate=True``: steps from an approximate Jacobian (here one that
+    ``pmpjax.internal.frozen_tangents`` switches to, one column off along the data's misfit:
+    alone it moves the stationary point by several standard errors, where the misfit is
+    systematic as in the reaching fits), then from the exact one near the optimum. The
+    optimum, within 0.02 standard errors of SciPy's, the exact Jacobian in ``jac`` also when the
+    step limit stops the fit, and the status are the exact Jacobian's."""
+    from pmpjax.internal import frozen_tangents
+
+    rng = np.random.default_rng(11)
+    t = np.linspace(0.0, 4.0, 60)
+    y = 1.3 * np.exp(-0.7 * t) + 0.2 + 0.15 * np.sin(2.5 * t) + rng.normal(scale=0.02, size=t.size)
+
+    def model(p):
+        return p[0] * jnp.exp(-p[1] * t) + p[2] - y
+
+    def resid(p, _, always=False):
+        fr = frozen_tangents()
+        skew = 0.3 * p[1] * jnp.sin(2.5 * t)  # (value 0 below; adds 0.3 sin(2.5 t) to the k column)
+        on = jnp.asarray(True) if always else (jnp.asarray(False) if fr is None else fr)
+        return model(p) + jnp.where(on, 1.0, 0.0) * (skew - jax.lax.stop_gradient(skew))
+
+    x0 = np.array([0.6, 1.8, -0.3])
+    ref = scipy.optimize.least_squares(lambda p: np.asarray(model(jnp.asarray(p))), x0, method="lm",
+                                       xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    se = np.sqrt(2 * ref.cost / (t.size - 3) * np.diag(np.linalg.inv(ref.jac.T @ ref.jac)))
+    opts = dict(stol=1e-4, ftol=0.0, xtol=0.0)
+    alone = fitting.least_squares(lambda p, a: resid(p, a, always=True), x0, None, **opts)
+    assert np.max(np.abs(np.asarray(alone.x) - ref.x) / se) > 1.0  # (what the exact steps must undo)
+    res = fitting.least_squares(resid, x0, None, approximate=True, **opts)
+    assert int(res.status) == int(pj.Status.SUCCESSFUL)
+    assert np.max(np.abs(np.asarray(res.x) - ref.x) / se) < 0.02
+    exact = lambda x: np.asarray(jax.jacfwd(model)(x))  # noqa: E731
+    np.testing.assert_allclose(np.asarray(res.jac), exact(res.x), rtol=1e-12, atol=1e-14)
+    short = fitting.least_squares(resid, x0, None, approximate=True, max_steps=2, **opts)
+    assert int(short.status) == int(pj.Status.MAX_STEPS) and int(short.steps) == 2
+    np.testing.assert_allclose(np.asarray(short.jac), exact(short.x), rtol=1e-12, atol=1e-14)
+    start = jax.jit(lambda m: fitting.least_squares(resid, x0, None, approximate=True, max_steps=m, **opts))(0)
+    np.testing.assert_allclose(np.asarray(start.jac), exact(x0), rtol=1e-12, atol=1e-14)
+    assert int(start.steps) == 0
+
+
 @pytest.mark.bad_input("fitting.least_squares", "fitting.covariance")
 def test_bad_input():
     cases = [

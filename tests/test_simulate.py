@@ -367,6 +367,35 @@ def test_folded_forward_jacobians_match_central_differences():
         np.testing.assert_allclose(J[..., i], fd, rtol=1e-5, atol=1e-7)
 
 
+def test_frozen_tangents_hold_rodas4s_field_jacobian_only_where_asked():
+    """``forward_jacobians(frozen=flag)`` with a traced flag: false gives RODAS4's exact derivative
+    (central differences, to 1e-6); true an approximate one (the field Jacobian held along the
+    tangents) that differs from it, but not by more than a few per cent at these coarse steps; the
+    trajectory itself is the same either way."""
+    from pmpjax.internal import forward_jacobians
+
+    q0 = QREST_S2 + np.array([0.05, 0.0, 0.05])
+    kw = dict(duration=0.2, dt=0.02, saveat=pj.SaveAt(ts=np.linspace(0.0, 0.2, 6)), solver="rodas4")
+
+    def path(theta):
+        model = pj.Lambda0PMP(CHAIN, KJ=theta[2] * KJ_S2, q_rest=QREST_S2, W=theta[0] * KJ_S2)
+        return pj.simulate(model, pj.ArimotoPlanner(k=None, tau=theta[1], tau0=theta[0]), q0, TG["NW"], **kw).q
+
+    @pj.fast_compile_jit
+    def jac(theta, frozen):
+        with forward_jacobians(frozen=frozen):
+            return jax.jacfwd(lambda th: (path(th),) * 2, has_aux=True)(theta)
+
+    theta = jnp.array([0.08, 0.06, 1.3])
+    (J, q), (Jf, qf) = jac(theta, jnp.asarray(False)), jac(theta, jnp.asarray(True))
+    np.testing.assert_array_equal(np.asarray(q), np.asarray(qf))
+    f = lambda th: np.asarray(jac(th, jnp.asarray(False))[1])  # noqa: E731  (the path, from the same compile)
+    fd = np.stack([(f(theta + e) - f(theta - e)) / 2e-6 for e in 1e-6 * np.eye(3)], -1)
+    np.testing.assert_allclose(np.asarray(J), fd, rtol=1e-6, atol=1e-8)
+    rel = np.max(np.abs(np.asarray(Jf) - fd)) / np.max(np.abs(fd))
+    assert 1e-5 < rel < 0.05, rel
+
+
 def test_float32_runs_warn_once_and_x64_runs_do_not(tmp_path):
     # Without jax_enable_x64 JAX computes in float32: the first simulate/fit says so, once.
     import subprocess

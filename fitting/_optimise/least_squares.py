@@ -65,6 +65,15 @@ class LeastSquaresResult:
         return self.status == Status.SUCCESSFUL
 
 
+#: With ``approximate=True`` the exact Jacobian takes over once the full Gauss–Newton step would
+#: lower the cost by less than this many times the statistical tolerance (``stol``): about where
+#: the approximate Jacobian's bias stops the progress on the reaching fits.
+APPROXIMATE_UNTIL = 100.0
+#: ... or once this many steps in a row were rejected (the damping has then grown 64-fold: the
+#: approximate Jacobian, not the step length, is in doubt).
+APPROXIMATE_REJECTS = 3
+
+
 def least_squares(
     residual,
     x0,
@@ -77,6 +86,7 @@ def least_squares(
     stol: float | None = None,
     damping: float = 1e-3,
     linearise=None,
+    approximate: bool = False,
 ) -> LeastSquaresResult:
     """Minimise ``½ |residual(x, args)|²`` over ``x`` by Levenberg–Marquardt (jit-able, vmappable).
 
@@ -90,6 +100,18 @@ def least_squares(
     interpolation) and Levenberg–Marquardt would crawl. Non-finite trial residuals are rejected steps.
     The Jacobian is forward-mode autodiff of ``residual`` unless ``linearise`` is given.
 
+    With ``approximate=True`` the steps come from an approximate Jacobian until a convergence test
+    holds: the linearisation is traced inside ``pmpjax.internal.forward_jacobians(frozen=...)``, so
+    fixed-step RODAS4 simulations hold their field Jacobian fixed along the tangents (about half
+    the cost of a Jacobian through them; a residual may read the flag itself,
+    ``pmpjax.internal.frozen_tangents``). The approximate Jacobian moves the stationary point
+    (by about 0.1 standard errors on the reaching fits), so when a test holds the exact Jacobian
+    is computed at the current point and Levenberg–Marquardt goes on from it: convergence is
+    judged, and ``jac`` reported, from the exact Jacobian only (also when ``max_steps`` runs out).
+    The exact Jacobian takes over (from the initial damping) when a convergence test holds, the
+    statistical one within ``APPROXIMATE_UNTIL`` times ``stol``, after ``APPROXIMATE_REJECTS``
+    rejected steps in a row, or at the step limit.
+
     **Arguments:**
 
     - ``residual``: a JAX function ``residual(x, args)`` -> (N,) residual vector.
@@ -102,6 +124,7 @@ def least_squares(
     - ``linearise``: optional ``(x, args) -> (r (N,), J (N, p))`` in place of forward-mode autodiff of
       ``residual`` (traced inside ``pmpjax.internal.forward_jacobians``), for Jacobians with known
       structure, e.g. per-item nuisance parameters whose columns one JVP gives together.
+    - ``approximate``: steps from an approximate Jacobian until a test holds (above).
 
     **Returns:**
 
@@ -128,10 +151,10 @@ def least_squares(
             raise ValueError(f"`{name}` must be a finite tolerance >= 0, got {v}")
     check_positive("damping", damping)
 
-    def lin(x):
+    def lin(x, exact):
         # One pass: the residual rides along as jacfwd's aux output (no second primal solve).
         # (simulate's JVP with the tangents folded into its batch: pmpjax.internal.forward_jacobians)
-        with forward_jacobians():
+        with forward_jacobians(frozen=jnp.logical_not(exact) if approximate else None):
             if linearise is not None:
                 return linearise(x, args)
             J, r = jax.jacfwd(lambda y: (residual(y, args),) * 2, has_aux=True)(x)
@@ -139,7 +162,7 @@ def least_squares(
 
     # Traced once: the shapes come from this trace and the loop replays its jaxpr (a separate
     # `eval_shape` of the residual would trace a simulation once more).
-    lin_jaxpr, (r_shape, _) = jax.make_jaxpr(lin, return_shape=True)(x0)
+    lin_jaxpr, (r_shape, _) = jax.make_jaxpr(lin, return_shape=True)(x0, jnp.asarray(True))
     if r_shape.ndim != 1:
         raise ValueError(f"`residual` must return a 1-D vector, got shape {r_shape.shape}")
     N, p = r_shape.shape[0], x0.shape[0]
@@ -150,43 +173,57 @@ def least_squares(
     # run a simulation), instead of once before the loop and once inside it.
     state0 = dict(x=x0, r=jnp.zeros((N,), dtype), J=jnp.zeros((N, p), dtype), cost=jnp.asarray(jnp.inf, dtype),
                   lam=jnp.asarray(damping, dtype), nu=jnp.asarray(2.0, dtype), step=jnp.asarray(0),
-                  done=jnp.asarray(False), conv=jnp.asarray(False), first=jnp.asarray(True))
+                  done=jnp.asarray(False), conv=jnp.asarray(False), first=jnp.asarray(True),
+                  exact=jnp.asarray(not approximate), relin=jnp.asarray(False), rejects=jnp.asarray(0))
 
     def cond(s):  # (the first pass, the linearisation at x0, runs even for a traced max_steps = 0)
-        return (~s["done"]) & ((s["step"] < max_steps) | s["first"])
+        return (~s["done"]) & ((s["step"] < max_steps) | s["first"] | s["relin"])
 
     def body(s):
         x, r, J, cost, lam, nu, first = s["x"], s["r"], s["J"], s["cost"], s["lam"], s["nu"], s["first"]
+        exact, relin = s["exact"], s["relin"]
+        again = first | relin  # a pass that linearises at x (no step)
         g = J.T @ r
         H = J.T @ J
         d = jnp.maximum(jnp.diag(H), 1e-12 * jnp.max(jnp.diag(H)) + 1e-300)
         delta = -jnp.linalg.solve(H + lam * jnp.diag(d), g)
-        delta = jnp.where(first, 0.0, delta)
+        delta = jnp.where(again, 0.0, delta)
         x_new = x + delta
-        r_new, J_new = lin(x_new)
+        r_new, J_new = lin(x_new, exact)
         cost_new = 0.5 * jnp.sum(r_new**2)
         pred = -(g @ delta + 0.5 * delta @ (H @ delta))
         ok = jnp.isfinite(cost_new) & jnp.all(jnp.isfinite(J_new))
         rho = jnp.where(ok & (pred > 0), (cost - cost_new) / jnp.where(pred > 0, pred, 1.0), -1.0)
-        accept = (rho > 0) | first
+        accept = (rho > 0) | again
         lam_acc = lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
         active = jnp.any(J != 0, axis=0)  # (a parameter whose column is exactly zero is held, not fitted)
-        small_step = ~first & (jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(jnp.where(active, x, 0.0)) + xtol))
-        small_f = ~first & accept & (jnp.abs(cost - cost_new) <= ftol * cost)
+        small_step = ~again & (jnp.linalg.norm(delta) <= xtol * (jnp.linalg.norm(jnp.where(active, x, 0.0)) + xtol))
+        small_f = ~again & accept & (jnp.abs(cost - cost_new) <= ftol * cost)
         x, r, J, cost = jax.tree_util.tree_map(
             lambda a, b: jnp.where(accept, a, b), (x_new, r_new, J_new, cost_new), (x, r, J, cost)
         )
         small_g = ~first & (jnp.max(jnp.abs(J.T @ r)) <= gtol)
         conv = small_g | small_f | small_step
+        near = conv
         if stol is not None:
             dof = jnp.maximum(N - jnp.sum(active), 1)
-            conv = conv | (~first & (_gauss_newton_gain(J, r) <= stol * 2.0 * cost / dof))
+            gain = _gauss_newton_gain(J, r) / (stol * 2.0 * cost / dof)
+            conv = conv | (~first & (gain <= 1.0))
+            near = conv | (~first & (gain <= APPROXIMATE_UNTIL))
+        step = s["step"] + jnp.where(again, 0, 1)
+        # With an approximate Jacobian a test that holds, the statistical one within
+        # APPROXIMATE_UNTIL, rejected steps in a row or the last step send the loop to one more
+        # pass at x with the exact Jacobian (from the initial damping), which alone can end it.
+        rejects = jnp.where(accept, 0, s["rejects"] + 1)
+        to_exact = ~exact & (near | (step >= max_steps) | (rejects >= APPROXIMATE_REJECTS))
+        conv = conv & exact
         # A non-finite start stops the loop (reported as not converged).
         done = conv | (first & ~ok)
-        return dict(x=x, r=r, J=J, cost=cost,
-                    lam=jnp.where(first, lam, jnp.where(accept, lam_acc, lam * nu)),
-                    nu=jnp.where(first, nu, jnp.where(accept, 2.0, 2.0 * nu)),
-                    step=s["step"] + jnp.where(first, 0, 1), done=done, conv=conv, first=jnp.asarray(False))
+        lam = jnp.where(again, lam, jnp.where(accept, lam_acc, lam * nu))
+        nu = jnp.where(again, nu, jnp.where(accept, 2.0, 2.0 * nu))
+        return dict(x=x, r=r, J=J, cost=cost, lam=jnp.where(to_exact, damping, lam).astype(dtype),
+                    nu=jnp.where(to_exact, 2.0, nu).astype(dtype), step=step, done=done, conv=conv,
+                    first=jnp.asarray(False), exact=exact | to_exact, relin=to_exact & ~done, rejects=rejects)
 
     s = lax.while_loop(cond, body, state0)
     gn = jnp.max(jnp.abs(s["J"].T @ s["r"]))

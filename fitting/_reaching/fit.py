@@ -90,12 +90,14 @@ def _as_reaches(m: _Motions) -> SubjectReaches:
 
 
 def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100), theta0=None,
-                 keep_jac: bool = False, steps: int | None = None, solver: str | None = None) -> dict:
+                 keep_jac: bool = False, steps: int | None = None, solver: str | None = None,
+                 approximate: bool = True) -> dict:
     """Fit every subject's usable motions (each ``len(m) >= 1``) by ``fit_movements``' engine
     (``fitting._movements.fit._fit``: stage 1, stage 2 from there unless ``max_steps[1] == 0``,
     the integration error at the optimum and the step refinement) on the HuG-MP model
     (:func:`_generic_config`), the elbow's rest angle held at its gauge. ``theta0`` (S, p) skips
-    stage 1 and starts stage 2 there; ``steps``/``solver`` fix the integration. Returns the fit
+    stage 1 and starts stage 2 there; ``steps``/``solver`` fix the integration; ``approximate`` as
+    ``fit_movements``' engine's (False: exact Jacobians throughout). Returns the fit
     in this module's parameters (``_param_names``: the elbow's rest angle left out), with the
     delete-one-motion jackknife covariance after stage 2 (the Gauss–Newton one of stage 1 for a
     Donders-fitted model) and the residual with the four bounds of ``_bound_residual`` last."""
@@ -109,7 +111,7 @@ def _fit_motions(motions: list[_Motions], cfg: _Config, *, max_steps=(100, 100),
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (fit_reaching warns itself, naming its step option)
         g = fit_subjects(_chain(), reaches, gcfg, max_steps, REST_MARGIN_DEG, theta0=theta0, steps=steps,
-                         solver=solver, identify=False, name="fit_reaching")
+                         solver=solver, identify=False, name="fit_reaching", approximate=approximate)
     weight, B = g["weight"], g["B"]
     bounds = B * SAMPLES * 4 + np.array([0, 1, 2, 3])  # (cond(KJ), the shoulder rest angles; not the elbow's)
     margin = np.deg2rad(REST_MARGIN_DEG)

@@ -126,7 +126,7 @@ SOLVERS = ("rk4", "rodas4")
 
 
 def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage_loop: bool = False,
-                    tableau: RosenbrockTableau = RODAS4):
+                    tableau: RosenbrockTableau = RODAS4, frozen=None):
     """One Rosenbrock step of ``ẏ = f(t, y, args)`` for a component-leading array ``y`` (n, ...)
     whose batch elements are independent (``f`` acts elementwise over the trailing axes, as the
     fields of ``simulate`` do), with the exact Jacobian of ``f`` by forward-mode autodiff.
@@ -134,14 +134,27 @@ def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage
     ``observed``/``stage_loop`` as :func:`rk4_step` (the observation is that of the linearisation
     point ``(t, y)``); with ``observed=True`` returns ``(y_next, obs, err)``, ``err`` the last stage
     increment: the difference to the embedded order-3 solution (Hairer & Wanner's ``rodas.f``).
+
+    ``frozen``: None, or a traced bool; where true, forward-mode derivatives through the step hold
+    the field's Jacobian fixed (no second derivatives of ``f``: the derivative of a Rosenbrock-W
+    step with RODAS4's coefficients, not of this step; about half the cost of a fit's Jacobian
+    through ``simulate``). The step itself is unchanged.
     """
     g = f if observed else (lambda t_, y_, a_: (f(t_, y_, a_), None))
     n = y.shape[0]
-    f0, lin, obs = jax.linearize(lambda t_, y_: g(t_, y_, args), t, y, has_aux=True)
-    # n Jacobian columns (unit tangents of every trajectory's component j) and ∂f/∂t, in one vmap.
-    eye = jnp.eye(n + 1, n, dtype=y.dtype).reshape((n + 1, n) + (1,) * (y.ndim - 1))
-    t_dir = jnp.zeros((n + 1,) + jnp.shape(t), jnp.result_type(t)).at[n].set(1.0)
-    cols = jax.vmap(lin)(t_dir, jnp.broadcast_to(eye, (n + 1,) + y.shape))
+
+    def linearisation():
+        f0, lin, obs = jax.linearize(lambda t_, y_: g(t_, y_, args), t, y, has_aux=True)
+        # n Jacobian columns (unit tangents of every trajectory's component j) and ∂f/∂t, in one vmap.
+        eye = jnp.eye(n + 1, n, dtype=y.dtype).reshape((n + 1, n) + (1,) * (y.ndim - 1))
+        t_dir = jnp.zeros((n + 1,) + jnp.shape(t), jnp.result_type(t)).at[n].set(1.0)
+        return f0, jax.vmap(lin)(t_dir, jnp.broadcast_to(eye, (n + 1,) + y.shape)), obs
+
+    def held():
+        f0, obs = g(t, y, args)
+        return f0, lax.stop_gradient(linearisation()[1]), obs
+
+    f0, cols, obs = linearisation() if frozen is None else lax.cond(frozen, held, linearisation)
     ft = cols[n]
     inv_gh = 1.0 / (tableau.gamma * h)
     lu = lu_factor_lists([[(inv_gh if i == j else 0.0) - cols[j][i] for j in range(n)] for i in range(n)])
@@ -273,7 +286,7 @@ def _error_norm(e):
 
 def integrate_observed(
     f: Callable, y0: Any, t0s, hs, n_steps: int, args: Any, acc: Any, write: Callable | None, *,
-    block: int = 1, unroll: int = 1, stage_loop: bool = False, solver: str = "rk4",
+    block: int = 1, unroll: int = 1, stage_loop: bool = False, solver: str = "rk4", frozen=None,
 ):
     """Integrate ``ẏ = f(t, y, args)[0]`` over consecutive segments, observing their starts, and
     accumulate the solver's embedded local error estimates.
@@ -284,7 +297,8 @@ def integrate_observed(
     measured 2× slower with one step per segment), ``n_steps`` static steps per segment;
     ``write(acc, i, obs) -> acc`` receives the observations of the starts of segments
     ``i, ..., i + block − 1`` stacked on a leading ``(block,)`` axis (``block`` divides S);
-    ``write=None`` observes nothing. ``solver``: one of :data:`SOLVERS`.
+    ``write=None`` observes nothing. ``solver``: one of :data:`SOLVERS`; ``frozen``: RODAS4's
+    (:func:`rosenbrock_step`).
 
     RK4 carries its first stage from step to step (:func:`rk4_fsal_step`): the observations of
     segment starts and of the end come free. RODAS4 observes its linearisation point: free with
@@ -318,7 +332,8 @@ def integrate_observed(
         @jax.checkpoint
         def step(t, c, h):
             y, _, err = c
-            y_next, obs, e = rosenbrock_step(f, t, y, h, args, observed=True, stage_loop=stage_loop)
+            y_next, obs, e = rosenbrock_step(f, t, y, h, args, observed=True, stage_loop=stage_loop,
+                                                 frozen=frozen)
             return (y_next, None, err + lax.stop_gradient(_error_norm(e))), obs
 
     observe = jax.checkpoint(lambda t, y: f(t, y, args)[1])

@@ -500,8 +500,9 @@ def _kernel(**statics):
 
     @kernel.defjvp
     def _jvp(primals, tangents):
-        if _FOLD_TANGENTS.get():
-            return _kernel_jvp(**statics)(primals, tangents)
+        fold = _FOLD_TANGENTS.get()
+        if fold is not None:
+            return _kernel_jvp(**statics)(primals, tangents, fold[0] if statics["solver"] == "rodas4" else None)
         return jax.jvp(run_jvp, primals, tangents)
 
     def call(*args):
@@ -536,23 +537,35 @@ def _primal_run(statics, traced=False):
     return partial(_run, **statics)
 
 
-#: Set (at trace time) by :func:`forward_jacobians`.
-_FOLD_TANGENTS = contextvars.ContextVar("pmpjax_fold_tangents", default=False)
+#: Set (at trace time) by :func:`forward_jacobians`: None, or ``(frozen,)``.
+_FOLD_TANGENTS = contextvars.ContextVar("pmpjax_fold_tangents", default=None)
 
 
 @contextlib.contextmanager
-def forward_jacobians():
+def forward_jacobians(frozen=None):
     """Trace forward-mode Jacobians (``jax.jacfwd``, also under ``jax.vmap``) through ``simulate``
     with ``_kernel_jvp``'s batching rule: ``jax.jacfwd``'s tangents are batched with the primal
     computed once; a mapped axis of primals and tangents alike (a caller's ``vmap`` of the JVP) is
     folded into the run's own (trailing, contiguous) batch. The result is forward-mode only (no
     ``grad`` or second derivatives of what is traced inside); ``fitting.least_squares`` uses it
-    for its Jacobians."""
-    token = _FOLD_TANGENTS.set(True)
+    for its Jacobians.
+
+    ``frozen``: None, or a (traced) bool: where true, fixed-step RODAS4 runs hold the field's
+    Jacobian fixed along the tangents (``pmpjax._pmp.integrate.rosenbrock_step``): an approximate
+    Jacobian at about half the cost (``fitting.least_squares(approximate=True)``). Read by other
+    residuals through :func:`frozen_tangents`."""
+    token = _FOLD_TANGENTS.set((frozen,))
     try:
         yield
     finally:
         _FOLD_TANGENTS.reset(token)
+
+
+def frozen_tangents():
+    """Inside :func:`forward_jacobians`, its ``frozen`` flag (None when not given); None outside: a
+    residual with a cheaper approximate Jacobian of its own may switch to it where it is true."""
+    fold = _FOLD_TANGENTS.get()
+    return None if fold is None else fold[0]
 
 
 @functools.lru_cache(maxsize=256)
@@ -561,13 +574,14 @@ def _kernel_jvp(**statics):
     run_jvp = partial(_run, **{**statics, "stage_loop": True})
 
     @jax.custom_batching.custom_vmap
-    def jvp(primals, tangents):
-        return jax.jvp(run_jvp, primals, tangents)
+    def jvp(primals, tangents, frozen):
+        return jax.jvp(partial(run_jvp, frozen=frozen), primals, tangents)
 
     @jvp.def_vmap
-    def _rule(axis_size, in_batched, primals, tangents):
-        pb, tb = in_batched
-        plain = any(jax.tree_util.tree_leaves((pb[0].chain, pb[4:], tb[0].chain, tb[4:])))
+    def _rule(axis_size, in_batched, primals, tangents, frozen):
+        pb, tb, fb = in_batched
+        run = partial(run_jvp, frozen=frozen)
+        plain = any(jax.tree_util.tree_leaves((pb[0].chain, pb[4:], tb[0].chain, tb[4:], fb)))
         flags = Trajectory(t=False, q=True, x=True, qdot=True, xdot=True, manipulability=True, status=True,
                            error_estimate=True)
         if not plain and not any(jax.tree_util.tree_leaves(pb)):
@@ -576,11 +590,12 @@ def _kernel_jvp(**statics):
             # reaching fit's Jacobian 1.6x slower with RODAS4, 1.9x with RK4; benchmarks/stiff.py).
             axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb))
             oax = jax.tree_util.tree_map(lambda f: 0 if f else None, flags)
-            out = jax.vmap(lambda p, t: jax.jvp(run_jvp, p, t), in_axes=axes, out_axes=(None, oax))(primals, tangents)
+            out = jax.vmap(lambda p, t: jax.jvp(run, p, t), in_axes=axes, out_axes=(None, oax))(primals, tangents)
             return out, (jax.tree_util.tree_map(lambda _: False, flags), flags)
-        if plain:  # a mapped chain or time grid: plain vmap of the JVP
-            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb))
-            out = jax.vmap(lambda p, t: jax.jvp(run_jvp, p, t), in_axes=axes)(primals, tangents)
+        if plain:  # a mapped chain, time grid or frozen flag: plain vmap of the JVP
+            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, (pb, tb, fb))
+            out = jax.vmap(lambda p, t, fr: jax.jvp(partial(run_jvp, frozen=fr), p, t), in_axes=axes)(
+                primals, tangents, frozen)
             return out, jax.tree_util.tree_map(lambda _: True, out)
         batch = statics["batch"]
 
@@ -611,7 +626,7 @@ def _kernel_jvp(**statics):
         q0p, q0t = pair(q0p, q0t, pb[2], tb[2], 1)
         tgp, tgt = pair(tgp, tgt, pb[3], tb[3], 2)
         out = _kernel_jvp(**{**statics, "batch": (axis_size,) + batch})(
-            (mp, plp, q0p, tgp, t0p, hp), (mt, plt, q0t, tgt, t0t, ht))
+            (mp, plp, q0p, tgp, t0p, hp), (mt, plt, q0t, tgt, t0t, ht), frozen)
         return out, (flags, flags)
 
     return jvp
@@ -746,8 +761,9 @@ def _prepare(model, planner, q0, targets, batch):
 
 
 def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, include_initial, singular_tol,
-               single, stage_loop=False, solver="rk4"):
-    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,)."""
+               single, stage_loop=False, solver="rk4", frozen=None):
+    """``h``: the step size of every segment as a Python float, or None to use ``hs`` (S,);
+    ``frozen``: RODAS4's (``integrate.rosenbrock_step``)."""
     chain, consts, planner, q, tg, field = _prepare(model, planner, q0, targets, batch)
     n, m = chain.n, chain.m
     B = math.prod(batch)
@@ -778,10 +794,10 @@ def _movements(model, planner, q0, targets, t0s, hs, *, h, batch, n_steps, inclu
             block = max(k_ for k_ in range(1, _BLOCK + 1) if n_seg % k_ == 0) if include_initial else 1
             wr = lambda a, i, obs: write(a, k * S + jnp.maximum(i - offset, 0), obs, i >= offset)  # noqa: E731
             qc, acc, e, obs = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, wr, block=block,
-                                                 stage_loop=stage_loop, solver=solver)
+                                                 stage_loop=stage_loop, solver=solver, frozen=frozen)
         else:
             qc, acc, e, obs = integrate_observed(field, qc, t0s, step_h, n_steps, args, acc, None,
-                                                 stage_loop=stage_loop, solver=solver)
+                                                 stage_loop=stage_loop, solver=solver, frozen=frozen)
         acc = write(acc, k * S + S - 1, jax.tree_util.tree_map(lambda v: v[None], obs), True)  # the end state
         return (qc, acc, err + e), None
 
