@@ -174,7 +174,9 @@ def least_squares(
     state0 = dict(x=x0, r=jnp.zeros((N,), dtype), J=jnp.zeros((N, p), dtype), cost=jnp.asarray(jnp.inf, dtype),
                   lam=jnp.asarray(damping, dtype), nu=jnp.asarray(2.0, dtype), step=jnp.asarray(0),
                   done=jnp.asarray(False), conv=jnp.asarray(False), first=jnp.asarray(True),
-                  exact=jnp.asarray(not approximate), relin=jnp.asarray(False), rejects=jnp.asarray(0))
+                  # (max_steps = 0 asks for the linearisation at x0: the exact one at once)
+                  exact=jnp.asarray(not approximate) | (jnp.asarray(max_steps) <= 0), relin=jnp.asarray(False),
+                  rejects=jnp.asarray(0))
 
     def cond(s):  # (the first pass, the linearisation at x0, runs even for a traced max_steps = 0)
         return (~s["done"]) & ((s["step"] < max_steps) | s["first"] | s["relin"])
