@@ -22,9 +22,9 @@ interval; for the time-base generator RK4 from the fewest steps stable at the st
 timing, ``_minjerk_start``; forward-mode derivatives, the nuisance columns ``k`` JVPs for all
 reaches together; with RODAS4 Levenberg–Marquardt steps from approximate Jacobians, the field
 Jacobian held fixed along the tangents at about 0.6 times the cost, until near the optimum, then
-from exact ones, which alone judge convergence and give the standard errors: on the four HuG-MP
-subjects the optima lie within 0.002 standard errors of exact steps throughout, stage 2 1.27×
-faster); the integration error at the optimum (against twice the steps) is checked and
+from exact ones, which alone judge convergence and give the standard errors: on HuG-MP's S01 the
+optimum lies within 0.001 standard errors of exact steps throughout, the fit 1.22× faster,
+``benchmarks/reaching.py``); the integration error at the optimum (against twice the steps) is checked and
 the step count doubled while it exceeds ``INTEGRATION_TOL_DEG`` (or, at the first count, is not
 finite). That check, not ``simulate``'s status, judges the fit's simulations: ``simulate``'s
 embedded estimate bounds the error of RODAS4's third-order companion, and at one step per sample
