@@ -75,7 +75,8 @@ defaults; ``--rounds 3``)::
     3.9073, JAX 3.9073; closed form against the slow reference: fields 1.7e-12, residuals 1.5e-11
     at the tight tolerances. Every subject converged; integration errors 0.0003–0.002°.
 
-Before (2-core AMD EPYC (Zen 4) KVM, exact Jacobians throughout). Fit cost (2026-12-06 17:46–17:49 UTC, ``results/reaching.json``; load average 1.5–1.8 (2.6 at
+Before (2-core AMD EPYC (Zen 4) KVM, exact Jacobians throughout). Fit cost (2026-12-06
+17:46–17:49 UTC, ``results/reaching.json``; load average 1.5–1.8 (2.6 at
 the start of the 4-subject call); defaults: ``max_steps=(100, 100)``, fitted time constants,
 RODAS4 from one step per sample; ``--rounds 3``)::
 
