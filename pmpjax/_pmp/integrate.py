@@ -150,9 +150,9 @@ def rosenbrock_step(f: Callable, t, y, h, args, *, observed: bool = False, stage
         t_dir = jnp.zeros((n + 1,) + jnp.shape(t), jnp.result_type(t)).at[n].set(1.0)
         return f0, jax.vmap(lin)(t_dir, jnp.broadcast_to(eye, (n + 1,) + y.shape)), obs
 
-    def held():
-        f0, obs = g(t, y, args)
-        return f0, lax.stop_gradient(linearisation()[1]), obs
+    def held():  # (the held Jacobian's tangents are dead code)
+        f0, cols, obs = linearisation()
+        return f0, lax.stop_gradient(cols), obs
 
     f0, cols, obs = linearisation() if frozen is None else lax.cond(frozen, held, linearisation)
     ft = cols[n]
